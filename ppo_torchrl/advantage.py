@@ -1,0 +1,29 @@
+"""Advantage estimation: TorchRL's GAE over a [num_envs, time] batch.
+
+Truncation is not termination: GAE bootstraps from V(next observation) unless `terminated`, and
+cuts the recursion at `done` (terminated or truncated). The collectors store the true final
+observation of a truncated episode as `("next", "observation")`, so the bootstrap value is right.
+"""
+
+from __future__ import annotations
+
+from tensordict import TensorDictBase
+from torchrl.objectives.value import GAE
+
+from ppo_torchrl.errors import ConfigError
+
+
+def make_advantage(cfg, critic) -> GAE:
+    if cfg.name != "gae":
+        raise ConfigError(f"advantage.name='{cfg.name}' is not known; use gae")
+    if not 0.0 <= cfg.gamma <= 1.0 or not 0.0 <= cfg.lmbda <= 1.0:
+        raise ConfigError(f"advantage.gamma={cfg.gamma} and advantage.lmbda={cfg.lmbda} must lie in [0, 1]")
+    return GAE(gamma=cfg.gamma, lmbda=cfg.lmbda, value_network=critic, average_gae=False)
+
+
+def explained_variance(batch: TensorDictBase) -> float:
+    """1 - Var[returns - values] / Var[returns], from GAE's outputs (CleanRL's diagnostic)."""
+    values = batch.get("state_value").reshape(-1)
+    targets = batch.get("value_target").reshape(-1)
+    var = targets.var()
+    return float("nan") if var == 0 else float(1 - (targets - values).var() / var)

@@ -1,0 +1,80 @@
+"""Checkpoints: atomic writes, the last K kept, the best by eval return kept apart.
+
+A checkpoint holds everything a resume or an evaluation needs: actor, critic, optimizer,
+normalization statistics, frame and iteration counters, RNG states and the resolved config.
+Writes go to a temporary file that is renamed over the target, so a process killed mid-write
+leaves the previous checkpoint intact.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import Optional
+
+import torch
+
+from ppo_torchrl.errors import ConfigError
+
+LAST = "last.pt"
+BEST = "best.pt"
+
+
+def atomic_write_bytes(path: Path, write) -> None:
+    """Call write(file) on a temp file in path's folder, fsync it, then rename it onto path."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            write(f)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def atomic_write_json(path: Path, data: dict) -> None:
+    atomic_write_bytes(path, lambda f: f.write((json.dumps(data, indent=2, default=float) + "\n").encode()))
+
+
+def save(path: Path, state: dict) -> None:
+    atomic_write_bytes(path, lambda f: torch.save(state, f))
+
+
+def load(path: Path | str) -> dict:
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"checkpoint '{path}' does not exist")
+    try:
+        state = torch.load(path, map_location="cpu", weights_only=False)
+    except Exception as exc:  # a truncated or foreign file: say so in one line
+        raise ConfigError(f"checkpoint '{path}' is corrupt or not a ppo_torchrl checkpoint ({type(exc).__name__})") from exc
+    if not isinstance(state, dict) or "actor" not in state or "frames" not in state:
+        raise ConfigError(f"checkpoint '{path}' is not a ppo_torchrl checkpoint (no actor weights or frame count)")
+    return state
+
+
+class CheckpointManager:
+    """<run dir>/checkpoints/{last.pt, best.pt, frames_<N>.pt}; keeps the newest `keep_last`."""
+
+    def __init__(self, directory: Path, keep_last: int, save_best: bool):
+        self.dir = Path(directory)
+        self.keep_last = keep_last
+        self.save_best = save_best
+        self.best_return: Optional[float] = None
+
+    def save(self, state: dict, eval_return: Optional[float] = None) -> Path:
+        save(self.dir / LAST, state)
+        if self.keep_last > 0:
+            save(self.dir / f"frames_{state['frames']:010d}.pt", state)
+            for old in sorted(self.dir.glob("frames_*.pt"))[: -self.keep_last]:
+                old.unlink()
+        if self.save_best and eval_return is not None and (self.best_return is None or eval_return > self.best_return):
+            self.best_return = eval_return
+            save(self.dir / BEST, state)
+        return self.dir / LAST

@@ -1,0 +1,244 @@
+"""Collectors: each call to `collect()` returns one batch of `frames_per_batch` frames.
+
+Both backends return a TensorDict of batch size [num_envs, steps] with TorchRL's keys:
+`observation`, `action`, and under `next`: `observation`, `reward`, `done`, `terminated`,
+`truncated`. Observations and rewards are the normalized ones the learner sees; raw episode
+returns and lengths come from `pop_episodes()`.
+
+- `FastCollector` (default) steps Gymnasium's MuJoCo envs in-process with a lean loop: one
+  forward of the policy net per step, numpy normalization, no per-step TensorDict. The per-step
+  cost is close to the simulator's own.
+- `TorchRLCollector` is the reference pipeline, `torchrl.collectors.Collector` over
+  `TransformedEnv(GymEnv)`; it is slower per step and kept for users who extend it with
+  TorchRL transforms.
+"""
+
+from __future__ import annotations
+
+from typing import List, Optional, Tuple
+
+import numpy as np
+import torch
+from tensordict import TensorDict
+from torchrl.collectors import Collector
+from torchrl.envs import ObservationNorm
+
+from ppo_torchrl.envs import make_gym_env, make_torchrl_env, torchrl_obs_stats
+from ppo_torchrl.errors import ConfigError
+from ppo_torchrl.models import ActorCritic, sample_action
+from ppo_torchrl.normalization import ObservationNormalizer, ReturnNormalization, ReturnNormalizer
+
+BACKENDS = ("fast", "torchrl")
+
+
+class FastCollector:
+    def __init__(self, cfg, ac: ActorCritic, seed: int, device: torch.device):
+        t = cfg.env.transforms
+        self.ac, self.device = ac, device
+        self.num_envs = cfg.collector.num_envs
+        self.steps = cfg.collector.frames_per_batch // self.num_envs
+        self.envs = [make_gym_env(cfg.env) for _ in range(self.num_envs)]
+        obs_dim = self.envs[0].observation_space.shape[0]
+        self.obs_norm = ObservationNormalizer((obs_dim,), t.obs_clip, t.norm_epsilon, enabled=t.obs_norm != "none")
+        self.reward_mode = t.reward_norm
+        self.reward_scale = t.reward_scale
+        self.reward_clip = t.reward_clip
+        self.return_norm = ReturnNormalizer(self.num_envs, cfg.advantage.gamma, t.reward_clip, t.norm_epsilon)
+        for i, env in enumerate(self.envs):
+            env.action_space.seed(seed + i)
+        if t.obs_norm == "fixed":
+            self._fit_fixed_obs_stats(t.obs_norm_init_frames, seed)
+        raw = np.stack([env.reset(seed=seed + i)[0] for i, env in enumerate(self.envs)])
+        self._obs = self.obs_norm(raw)
+        self._episode_return = np.zeros(self.num_envs)
+        self._episode_length = np.zeros(self.num_envs, np.int64)
+        self._finished: List[Tuple[float, int]] = []
+
+    def _fit_fixed_obs_stats(self, frames: int, seed: int) -> None:
+        """ObservationNorm-style stats from random-action rollouts, then frozen."""
+        env = self.envs[0]
+        obs = [env.reset(seed=seed)[0]]
+        for _ in range(frames - 1):
+            o, _, term, trunc, _ = env.step(env.action_space.sample())
+            obs.append(env.reset()[0] if term or trunc else o)
+        self.obs_norm.stats.update(np.stack(obs))
+        self.obs_norm.stats.frozen = True
+
+    def _scale_rewards(self, reward: np.ndarray, done: np.ndarray) -> np.ndarray:
+        if self.reward_mode == "return":
+            return self.return_norm(reward, done)
+        if self.reward_mode == "scale":
+            reward = reward * self.reward_scale
+            return np.clip(reward, -self.reward_clip, self.reward_clip) if self.reward_clip is not None else reward
+        return reward
+
+    @torch.no_grad()
+    def collect(self) -> TensorDict:
+        n, steps = self.num_envs, self.steps
+        obs_dim = self._obs.shape[1]
+        act_dim = self.ac.action_low.shape[0]
+        obs_buf = np.empty((steps, n, obs_dim), np.float32)
+        next_buf = np.empty((steps, n, obs_dim), np.float32)
+        act_buf = torch.empty((steps, n, act_dim), device=self.device)
+        rew_buf = np.empty((steps, n), np.float32)
+        term_buf = np.zeros((steps, n), bool)
+        trunc_buf = np.zeros((steps, n), bool)
+        raw_next = np.empty((n, obs_dim))
+        reward = np.empty(n)
+        policy_net, ac, envs = self.ac.policy_net, self.ac, self.envs
+        obs = self._obs
+        for t in range(steps):
+            obs_buf[t] = obs
+            loc, scale = policy_net(torch.from_numpy(obs).to(self.device))
+            stored, to_env = sample_action(ac, loc, scale)
+            act_buf[t] = stored
+            to_env = to_env.cpu().numpy()
+            reset_rows = []
+            for i, env in enumerate(envs):
+                o, r, term, trunc, _ = env.step(to_env[i])
+                raw_next[i], reward[i] = o, r
+                term_buf[t, i], trunc_buf[t, i] = term, trunc
+                if term or trunc:
+                    reset_rows.append((i, env.reset()[0]))
+            self._episode_return += reward
+            self._episode_length += 1
+            # The stats see what the policy sees next: the reset observation where an episode ended.
+            policy_raw = raw_next
+            if reset_rows:
+                policy_raw = raw_next.copy()
+                for i, first in reset_rows:
+                    policy_raw[i] = first
+                    self._finished.append((float(self._episode_return[i]), int(self._episode_length[i])))
+                    self._episode_return[i] = 0.0
+                    self._episode_length[i] = 0
+            if self.obs_norm.enabled:
+                self.obs_norm.stats.update(policy_raw)
+            next_obs = self.obs_norm(raw_next, update=False)
+            obs = next_obs if not reset_rows else self.obs_norm(policy_raw, update=False)
+            next_buf[t] = next_obs
+            rew_buf[t] = self._scale_rewards(reward, term_buf[t] | trunc_buf[t])
+        self._obs = obs
+
+        def tensor(x: np.ndarray) -> torch.Tensor:  # [steps, n, ...] -> [n, steps, ...]
+            return torch.from_numpy(np.ascontiguousarray(np.swapaxes(x, 0, 1))).to(self.device)
+
+        terminated = tensor(term_buf).unsqueeze(-1)
+        truncated = tensor(trunc_buf).unsqueeze(-1)
+        return TensorDict(
+            {
+                "observation": tensor(obs_buf),
+                "action": act_buf.transpose(0, 1).contiguous(),
+                "next": {
+                    "observation": tensor(next_buf),
+                    "reward": tensor(rew_buf).unsqueeze(-1),
+                    "terminated": terminated,
+                    "truncated": truncated,
+                    "done": terminated | truncated,
+                },
+            },
+            batch_size=[n, steps],
+            device=self.device,
+        )
+
+    def pop_episodes(self) -> List[Tuple[float, int]]:
+        finished, self._finished = self._finished, []
+        return finished
+
+    def obs_stats(self) -> Optional[dict]:
+        return self.obs_norm.stats.state_dict() if self.obs_norm.enabled else None
+
+    def state_dict(self) -> dict:
+        return {"obs": self.obs_stats(), "return": self.return_norm.stats.state_dict()}
+
+    def load_state_dict(self, state: dict) -> None:
+        if state.get("obs") is not None and self.obs_norm.enabled:
+            self.obs_norm.stats.load_state_dict(state["obs"])
+        if state.get("return") is not None:
+            self.return_norm.stats.load_state_dict(state["return"])
+
+    def close(self) -> None:
+        for env in self.envs:
+            env.close()
+
+
+class TorchRLCollector:
+    """`torchrl.collectors.Collector` over `TransformedEnv(GymEnv)`, same batch layout."""
+
+    def __init__(self, cfg, ac: ActorCritic, seed: int, device: torch.device):
+        env_cfg = cfg.env
+        if cfg.collector.num_envs > 1:
+            env_cfg = _with_make_kwargs(env_cfg, num_envs=cfg.collector.num_envs)
+        self.env = make_torchrl_env(
+            env_cfg, clip_actions=ac.head == "normal", gamma=cfg.advantage.gamma, train=True, device="cpu"
+        )
+        self.env.set_seed(seed)
+        self.collector = Collector(
+            self.env,
+            ac.actor,
+            frames_per_batch=cfg.collector.frames_per_batch,
+            total_frames=-1,
+            device=device,
+            storing_device=device,
+        )
+        self._iterator = iter(self.collector)
+        self._finished: List[Tuple[float, int]] = []
+
+    def collect(self) -> TensorDict:
+        batch = next(self._iterator)
+        if batch.ndim == 1:
+            batch = batch.unsqueeze(0)
+        else:  # Collector puts time last for batched envs already: [num_envs, steps]
+            pass
+        done = batch.get(("next", "done")).squeeze(-1)
+        returns = batch.get(("next", "episode_reward"))[done].reshape(-1).tolist()
+        lengths = batch.get(("next", "step_count"))[done].reshape(-1).tolist()
+        self._finished += list(zip(returns, lengths))
+        keys = ["observation", "action", ("next", "observation"), ("next", "reward"), ("next", "done"),
+                ("next", "terminated"), ("next", "truncated")]
+        return batch.select(*keys)
+
+    def pop_episodes(self) -> List[Tuple[float, int]]:
+        finished, self._finished = self._finished, []
+        return finished
+
+    def _return_norm(self) -> Optional[ReturnNormalization]:
+        return next((t for t in self.env.transform if isinstance(t, ReturnNormalization)), None)
+
+    def obs_stats(self) -> Optional[dict]:
+        return torchrl_obs_stats(self.env)
+
+    def state_dict(self) -> dict:
+        rn = self._return_norm()
+        return {"obs": self.obs_stats(), "return": rn.normalizer.stats.state_dict() if rn else None}
+
+    def load_state_dict(self, state: dict) -> None:
+        obs = state.get("obs")
+        for t in self.env.transform:
+            if obs is not None and isinstance(t, ObservationNorm):
+                t.loc.copy_(torch.as_tensor(obs["mean"]))
+                t.scale.copy_(torch.as_tensor(np.sqrt(obs["var"])))
+            elif obs is not None and getattr(t, "_loc", None) is not None:
+                t._loc["observation"].copy_(torch.as_tensor(obs["mean"]))
+                t._var["observation"].copy_(torch.as_tensor(obs["var"]))
+                t._count["observation"].fill_(int(obs["count"]))
+        rn = self._return_norm()
+        if rn is not None and state.get("return") is not None:
+            rn.normalizer.stats.load_state_dict(state["return"])
+
+    def close(self) -> None:
+        self.collector.shutdown()
+
+
+def _with_make_kwargs(env_cfg, **extra):
+    from omegaconf import OmegaConf
+
+    new = OmegaConf.to_container(env_cfg, resolve=True) if OmegaConf.is_config(env_cfg) else dict(env_cfg)
+    new["make_kwargs"] = {**(new.get("make_kwargs") or {}), **extra}
+    return OmegaConf.create(new)
+
+
+def make_collector(cfg, ac: ActorCritic, seed: int, device: torch.device):
+    backend = cfg.collector.backend
+    if backend not in BACKENDS:
+        raise ConfigError(f"collector.backend='{backend}' is not known; use one of {', '.join(BACKENDS)}")
+    return (FastCollector if backend == "fast" else TorchRLCollector)(cfg, ac, seed, device)

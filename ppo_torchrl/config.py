@@ -1,0 +1,165 @@
+"""Typed schemas for every config group, registered in Hydra's ConfigStore.
+
+`conf/config.yaml` starts from `base_config`, so a misspelt key or a value of the wrong type fails
+when the config is composed, before any environment is built. Each group in `conf/` has one
+dataclass here, named like the module that consumes it (`loss` -> `losses.py`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Dict, List, Optional
+
+from hydra.core.config_store import ConfigStore
+from omegaconf import MISSING
+
+
+@dataclass
+class TransformsConfig:
+    """Per-step env transforms (envs.py). Logged returns are always the raw ones."""
+
+    # running: VecNorm-style running mean/std; fixed: ObservationNorm with stats from initial
+    # random rollouts; none: raw observations.
+    obs_norm: str = "running"
+    obs_norm_init_frames: int = 1000  # frames of random rollouts that set the `fixed` stats
+    # return: divide by the std of the discounted return (gym NormalizeReward / SB3 VecNormalize);
+    # scale: multiply by `reward_scale` (TorchRL RewardScaling); none: raw rewards.
+    reward_norm: str = "return"
+    reward_scale: float = 1.0
+    obs_clip: Optional[float] = 10.0  # clip normalized observations to [-obs_clip, obs_clip]
+    reward_clip: Optional[float] = 10.0  # clip normalized rewards to [-reward_clip, reward_clip]
+    norm_epsilon: float = 1e-8
+
+
+@dataclass
+class EnvConfig:
+    """Which Gymnasium environment to train on (envs.py)."""
+
+    id: str = MISSING  # a registered Gymnasium continuous-control id, e.g. Hopper-v4
+    max_episode_steps: Optional[int] = None  # None: the id's registered time limit
+    make_kwargs: Dict[str, Any] = field(default_factory=dict)  # extra gymnasium.make kwargs
+    transforms: TransformsConfig = field(default_factory=TransformsConfig)
+
+
+@dataclass
+class PolicyConfig:
+    """Actor and critic networks (models.py)."""
+
+    # tanh_normal: TanhNormal squashed into the action bounds; normal: Normal whose sample is
+    # clipped to the bounds before it reaches the env (the stored action stays unclipped).
+    head: str = "normal"
+    # state_independent: a learned log-std vector; state_dependent: softplus of a network output.
+    std: str = "state_independent"
+    log_std_init: float = 0.0
+    std_min: float = 0.0  # floor added under the std; 0 disables it
+    hidden_sizes: List[int] = field(default_factory=lambda: [64, 64])
+    critic_hidden_sizes: List[int] = field(default_factory=lambda: [64, 64])
+    activation: str = "tanh"  # tanh | relu | elu
+    shared_trunk: bool = False  # one trunk (hidden_sizes) with a policy head and a value head
+    ortho_init: bool = True  # orthogonal init, gain sqrt(2) hidden, policy_head_gain, value_head_gain
+    policy_head_gain: float = 0.01
+    value_head_gain: float = 1.0
+
+
+@dataclass
+class LossConfig:
+    """Which TorchRL loss module, and how many passes over each batch (losses.py)."""
+
+    name: str = "clip_ppo"  # clip_ppo | kl_ppo | ppo | a2c | reinforce
+    epochs: int = 10
+    minibatch_size: Optional[int] = 64  # None: the whole batch is one minibatch
+    clip_epsilon: float = 0.2
+    entropy_coef: float = 0.0
+    critic_coef: float = 0.5
+    critic_loss: str = "l2"  # l2 | l1 | smooth_l1
+    clip_value: Optional[float] = None  # clipped value loss range (PPO2-style); None disables
+    normalize_advantage: bool = True  # per minibatch
+    kl_target: float = 0.01  # kl_ppo: target KL (dtarg)
+    kl_beta: float = 1.0  # kl_ppo: initial KL penalty coefficient
+    entropy_samples: int = 1  # Monte-Carlo samples where entropy has no closed form (TanhNormal)
+
+
+@dataclass
+class AdvantageConfig:
+    """Advantage estimator (advantage.py)."""
+
+    name: str = "gae"
+    gamma: float = 0.99
+    lmbda: float = 0.95
+
+
+@dataclass
+class OptimConfig:
+    """Optimizer and learning-rate schedule (trainer.py)."""
+
+    name: str = "adam"  # adam | adamw
+    lr: float = 3e-4
+    anneal_lr: bool = True  # linear decay to 0 over total_frames
+    eps: float = 1e-5
+    weight_decay: float = 0.0
+    max_grad_norm: Optional[float] = 0.5
+
+
+@dataclass
+class CollectorConfig:
+    """How frames are gathered (collector.py)."""
+
+    frames_per_batch: int = 2048
+    total_frames: int = 1_000_000
+    num_envs: int = 1
+    # fast: in-process gymnasium envs stepped by a lean loop that writes TorchRL-layout batches;
+    # torchrl: torchrl.collectors.Collector over TransformedEnv(GymEnv). Same algorithm, same keys.
+    backend: str = "fast"
+
+
+@dataclass
+class LoggerConfig:
+    """Experiment logger (report.py reads metrics.csv, which every run writes)."""
+
+    name: str = "csv"  # csv | none
+    project: str = "ppo_torchrl"
+    print_every_s: float = 10.0  # progress line period when stdout is not a TTY
+
+
+@dataclass
+class EvalConfig:
+    """Deterministic evaluation on a separate env with frozen normalization stats (evaluate.py)."""
+
+    every_frames: int = 100_000  # 0 disables periodic eval
+    episodes: int = 5
+    final_episodes: int = 10  # at the end of training; 0 disables
+    deterministic: bool = True
+
+
+@dataclass
+class CheckpointConfig:
+    """What is saved under <run dir>/checkpoints (checkpoint.py)."""
+
+    every_frames: int = 100_000
+    keep_last: int = 3
+    save_best: bool = True
+
+
+@dataclass
+class Config:
+    env: EnvConfig = field(default_factory=EnvConfig)
+    policy: PolicyConfig = field(default_factory=PolicyConfig)
+    loss: LossConfig = field(default_factory=LossConfig)
+    advantage: AdvantageConfig = field(default_factory=AdvantageConfig)
+    optim: OptimConfig = field(default_factory=OptimConfig)
+    collector: CollectorConfig = field(default_factory=CollectorConfig)
+    logger: LoggerConfig = field(default_factory=LoggerConfig)
+    eval: EvalConfig = field(default_factory=EvalConfig)
+    checkpoint: CheckpointConfig = field(default_factory=CheckpointConfig)
+    seed: int = 1
+    device: str = "cpu"  # cpu | cuda | auto: networks and the update; the simulator stays on CPU
+    torch_threads: int = 1  # small MLPs run fastest single-threaded
+    compile: bool = False  # torch.compile the loss
+
+
+def register_configs() -> None:
+    cs = ConfigStore.instance()
+    cs.store(name="base_config", node=Config)
+
+
+register_configs()

@@ -1,0 +1,203 @@
+"""Environments: checking an id, the raw Gymnasium env, and the TorchRL `TransformedEnv`.
+
+Two ways to step an env share these builders:
+- `make_gym_env` gives the real Gymnasium MuJoCo env that the fast collector steps directly;
+- `make_torchrl_env` gives `TransformedEnv(GymEnv(...))` with the TorchRL transforms, used by the
+  `collector.backend=torchrl` pipeline and, with frozen statistics, by evaluation and export checks.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Optional, Sequence
+
+import gymnasium as gym
+import numpy as np
+import torch
+from torchrl.envs import (
+    ClipTransform,
+    Compose,
+    DoubleToFloat,
+    GymEnv,
+    ObservationNorm,
+    RewardClipping,
+    RewardScaling,
+    RewardSum,
+    StepCounter,
+    Transform,
+    TransformedEnv,
+    VecNorm,
+)
+
+from ppo_torchrl.errors import ConfigError
+from ppo_torchrl.normalization import ReturnNormalization
+
+# Gymnasium's v4 MuJoCo envs warn on every make that v5 exists; the warning is not actionable here.
+warnings.filterwarnings("ignore", message=".*is out of date.*")
+warnings.filterwarnings("ignore", category=DeprecationWarning, module="gymnasium")
+
+CONF_ENV_DIR = Path(__file__).resolve().parent.parent / "conf" / "env"
+
+
+@dataclass(frozen=True)
+class EnvSpec:
+    """The shapes and bounds the models and checkpoints depend on."""
+
+    obs_dim: int
+    action_dim: int
+    action_low: np.ndarray
+    action_high: np.ndarray
+
+
+def env_files() -> list[str]:
+    """The env ids that have a file in conf/env (plus the generic `gym`)."""
+    return sorted(p.stem for p in CONF_ENV_DIR.glob("*.yaml"))
+
+
+def check_env_id(env_id: str) -> None:
+    """Fail with one line unless `env_id` is a registered continuous-control Gymnasium env."""
+    if env_id not in gym.registry:
+        known = ", ".join(n for n in env_files() if n != "gym")
+        raise ConfigError(
+            f"unknown environment id '{env_id}': not registered in Gymnasium. "
+            f"Env files: {known}. Any other registered id: env=gym env.id=<id>"
+        )
+
+
+def make_gym_env(env_cfg, render_mode: Optional[str] = None) -> gym.Env:
+    check_env_id(env_cfg.id)
+    kwargs = dict(env_cfg.make_kwargs or {})
+    if env_cfg.max_episode_steps is not None:
+        kwargs["max_episode_steps"] = env_cfg.max_episode_steps
+    if render_mode is not None:
+        kwargs["render_mode"] = render_mode
+    # The passive checker re-validates every step; the id is checked once above instead.
+    env = gym.make(env_cfg.id, disable_env_checker=True, **kwargs)
+    if not isinstance(env.action_space, gym.spaces.Box):
+        raise ConfigError(
+            f"env '{env_cfg.id}' has a {type(env.action_space).__name__} action space; "
+            "ppo_torchrl trains continuous-control (Box) envs only"
+        )
+    if len(env.observation_space.shape) != 1:
+        raise ConfigError(f"env '{env_cfg.id}' has observations of shape {env.observation_space.shape}; a flat vector is required")
+    return env
+
+
+def env_spec(env_cfg) -> EnvSpec:
+    env = make_gym_env(env_cfg)
+    spec = EnvSpec(
+        obs_dim=int(env.observation_space.shape[0]),
+        action_dim=int(env.action_space.shape[0]),
+        action_low=env.action_space.low.astype(np.float32),
+        action_high=env.action_space.high.astype(np.float32),
+    )
+    env.close()
+    return spec
+
+
+def make_torchrl_env(
+    env_cfg,
+    *,
+    clip_actions: bool,
+    gamma: float,
+    obs_stats: Optional[dict] = None,
+    train: bool = True,
+    render_mode: Optional[str] = None,
+    device: str = "cpu",
+) -> TransformedEnv:
+    """`TransformedEnv(GymEnv)` with the configured transforms.
+
+    train=True: running statistics (VecNorm) or ObservationNorm fitted on initial rollouts, and
+    reward normalization, as the collector needs them.
+    train=False: observation statistics frozen from `obs_stats` (mean/var) into an ObservationNorm,
+    rewards left raw: the evaluation env, whose returns are the ones a user compares.
+    """
+    check_env_id(env_cfg.id)
+    t = env_cfg.transforms
+    kwargs = dict(env_cfg.make_kwargs or {})
+    if env_cfg.max_episode_steps is not None:
+        kwargs["max_episode_steps"] = env_cfg.max_episode_steps
+    if render_mode is not None:
+        kwargs["render_mode"] = render_mode
+        kwargs["from_pixels"] = False
+    base = GymEnv(env_cfg.id, device=device, disable_env_checker=True, **kwargs)
+    transforms = []
+    if clip_actions:  # Normal head: the env gets the clipped action, the batch keeps the sample
+        spec = base.action_spec
+        transforms.append(ClipActionToBounds(spec.space.low, spec.space.high))
+    # RewardSum and StepCounter see raw rewards: logged returns are never the normalized ones.
+    transforms += [DoubleToFloat(), RewardSum(), StepCounter()]
+    obs_norm = None
+    if t.obs_norm == "running" and train:
+        obs_norm = VecNorm(in_keys=["observation"], decay=1.0, eps=t.norm_epsilon, new_api=True)
+    elif t.obs_norm == "fixed" and train and obs_stats is None:
+        obs_norm = ObservationNorm(in_keys=["observation"], standard_normal=True)
+    elif t.obs_norm != "none":
+        if obs_stats is None:
+            raise ValueError("a frozen observation normalization needs obs_stats")
+        obs_norm = frozen_observation_norm(obs_stats, t.norm_epsilon)
+    if obs_norm is not None:
+        transforms.append(obs_norm)
+        if t.obs_clip is not None:
+            transforms.append(ClipTransform(in_keys=["observation"], low=-t.obs_clip, high=t.obs_clip))
+    if train:
+        if t.reward_norm == "return":
+            transforms.append(ReturnNormalization(gamma=gamma, clip=None, epsilon=t.norm_epsilon))
+        elif t.reward_norm == "scale":
+            transforms.append(RewardScaling(loc=0.0, scale=t.reward_scale))
+        if t.reward_norm != "none" and t.reward_clip is not None:
+            transforms.append(RewardClipping(-t.reward_clip, t.reward_clip))
+    env = TransformedEnv(base, Compose(*transforms))
+    if isinstance(obs_norm, ObservationNorm) and not obs_norm.initialized:
+        obs_norm.init_stats(num_iter=t.obs_norm_init_frames, reduce_dim=0, cat_dim=0)
+    return env
+
+
+class ClipActionToBounds(Transform):
+    """Clips the action the env receives to per-dimension bounds; the tensordict keeps the sample.
+
+    (TorchRL's ClipTransform takes scalar bounds only; MuJoCo action bounds differ per joint.)
+    """
+
+    def __init__(self, low: torch.Tensor, high: torch.Tensor):
+        super().__init__(in_keys=[], out_keys=[], in_keys_inv=["action"], out_keys_inv=["action"])
+        self.register_buffer("low", torch.as_tensor(low).clone())
+        self.register_buffer("high", torch.as_tensor(high).clone())
+
+    def _inv_apply_transform(self, action: torch.Tensor) -> torch.Tensor:
+        return torch.maximum(torch.minimum(action, self.high), self.low)
+
+
+def frozen_observation_norm(obs_stats: dict, epsilon: float) -> ObservationNorm:
+    loc = torch.as_tensor(obs_stats["mean"], dtype=torch.float32)
+    scale = torch.as_tensor(np.sqrt(np.asarray(obs_stats["var"]) + epsilon), dtype=torch.float32)
+    return ObservationNorm(loc=loc, scale=scale, in_keys=["observation"], standard_normal=True)
+
+
+def torchrl_obs_stats(env: TransformedEnv) -> Optional[dict]:
+    """Observation statistics of a training TransformedEnv in the checkpoint's format."""
+    for transform in env.transform:
+        if isinstance(transform, ObservationNorm):
+            scale = transform.scale.detach().double().numpy()
+            return {"mean": transform.loc.detach().double().numpy(), "var": scale**2, "count": 0.0}
+        if hasattr(transform, "_loc") and getattr(transform, "_loc", None) is not None:
+            return {
+                "mean": transform._loc["observation"].double().numpy().copy(),
+                "var": transform._var["observation"].double().numpy().copy(),
+                "count": float(transform._count["observation"]),
+            }
+    return None
+
+
+def seed_everything(seed: int) -> None:
+    import random
+
+    random.seed(seed)
+    np.random.seed(seed)
+    torch.manual_seed(seed)
+
+
+def episode_seeds(seed: int, n: int) -> Sequence[int]:
+    return [seed * 1000 + i for i in range(n)]

@@ -1,0 +1,59 @@
+"""Loggers: `logger=csv|none` through torchrl.record.loggers, plus the run's own metrics.csv.
+
+Every run writes `metrics.csv` (one row per iteration, fixed columns) whatever logger is chosen:
+reports, sweeps and resume read it. The `logger` group adds an external logger on top.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+from typing import Dict, List, Optional
+
+from ppo_torchrl.errors import ConfigError
+
+LOGGERS = ("csv", "none")
+
+
+def make_logger(cfg, run_dir: Path):
+    if cfg.name not in LOGGERS:
+        raise ConfigError(f"logger='{cfg.name}' is not known; use one of {', '.join(LOGGERS)}")
+    if cfg.name == "none":
+        return None
+    from torchrl.record.loggers import CSVLogger
+
+    return CSVLogger(exp_name="csv", log_dir=str(run_dir / "logs"))
+
+
+class MetricsFile:
+    """Append-only CSV with a fixed header; columns missing from a row are left empty."""
+
+    def __init__(self, path: Path, columns: List[str], append: bool = False):
+        self.path = Path(path)
+        self.columns = columns
+        mode = "a" if append and self.path.exists() else "w"
+        self._file = open(self.path, mode, newline="")
+        self._writer = csv.DictWriter(self._file, fieldnames=columns, extrasaction="ignore")
+        if mode == "w":
+            self._writer.writeheader()
+
+    def write(self, row: Dict[str, float]) -> None:
+        self._writer.writerow({k: _fmt(v) for k, v in row.items()})
+        self._file.flush()
+
+    def close(self) -> None:
+        self._file.close()
+
+
+def _fmt(value) -> str:
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return ""
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    return str(value)
+
+
+def read_metrics(path: Path) -> List[Dict[str, Optional[float]]]:
+    with open(path, newline="") as f:
+        return [{k: (float(v) if v not in ("", None) else None) for k, v in row.items()} for row in csv.DictReader(f)]

@@ -1,0 +1,72 @@
+"""Loss modules by name: `loss=clip_ppo|kl_ppo|ppo|a2c|reinforce` picks a TorchRL LossModule.
+
+Every loss reads the same batch keys (observation, action, action_log_prob, advantage,
+value_target) and returns terms named `loss_*`; the trainer sums those terms, so adding a loss
+is one entry in LOSSES.
+"""
+
+from __future__ import annotations
+
+from typing import Callable, Dict
+
+from torchrl.objectives import A2CLoss, ClipPPOLoss, KLPENPPOLoss, LossModule, PPOLoss, ReinforceLoss
+
+from ppo_torchrl.errors import ConfigError
+from ppo_torchrl.models import ActorCritic
+
+
+def _ppo_kwargs(cfg) -> dict:
+    return dict(
+        entropy_bonus=cfg.entropy_coef > 0,
+        entropy_coeff=cfg.entropy_coef,
+        samples_mc_entropy=cfg.entropy_samples,
+        critic_coeff=cfg.critic_coef,
+        loss_critic_type=cfg.critic_loss,
+        normalize_advantage=False,  # the trainer normalizes per minibatch, the same for every loss
+        clip_value=cfg.clip_value,
+    )
+
+
+def _clip_ppo(cfg, ac: ActorCritic) -> LossModule:
+    return ClipPPOLoss(ac.actor, ac.critic, clip_epsilon=cfg.clip_epsilon, **_ppo_kwargs(cfg))
+
+
+def _kl_ppo(cfg, ac: ActorCritic) -> LossModule:
+    return KLPENPPOLoss(ac.actor, ac.critic, dtarg=cfg.kl_target, beta=cfg.kl_beta, **_ppo_kwargs(cfg))
+
+
+def _ppo(cfg, ac: ActorCritic) -> LossModule:
+    return PPOLoss(ac.actor, ac.critic, **_ppo_kwargs(cfg))
+
+
+def _a2c(cfg, ac: ActorCritic) -> LossModule:
+    return A2CLoss(
+        ac.actor,
+        ac.critic,
+        entropy_bonus=cfg.entropy_coef > 0,
+        entropy_coeff=cfg.entropy_coef,
+        samples_mc_entropy=cfg.entropy_samples,
+        critic_coeff=cfg.critic_coef,
+        loss_critic_type=cfg.critic_loss,
+        clip_value=cfg.clip_value,
+    )
+
+
+def _reinforce(cfg, ac: ActorCritic) -> LossModule:
+    # REINFORCE with the critic as a baseline; the advantage comes from the trainer's estimator.
+    return ReinforceLoss(ac.actor, ac.critic, loss_critic_type=cfg.critic_loss, clip_value=cfg.clip_value)
+
+
+LOSSES: Dict[str, Callable[[object, ActorCritic], LossModule]] = {
+    "clip_ppo": _clip_ppo,
+    "kl_ppo": _kl_ppo,
+    "ppo": _ppo,
+    "a2c": _a2c,
+    "reinforce": _reinforce,
+}
+
+
+def make_loss(cfg, ac: ActorCritic) -> LossModule:
+    if cfg.name not in LOSSES:
+        raise ConfigError(f"loss.name='{cfg.name}' is not a known loss; use one of {', '.join(LOSSES)}")
+    return LOSSES[cfg.name](cfg, ac)

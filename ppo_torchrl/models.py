@@ -1,0 +1,161 @@
+"""Actor and critic: TorchRL `ProbabilisticActor` (TanhNormal or Normal head) and `ValueOperator`.
+
+`make_actor_critic` also returns `policy_net`, the plain module obs -> (loc, scale) inside the
+actor. The fast collector calls it directly each step and samples with `sample_action`, which
+applies the same squashing as TorchRL's TanhNormal; log-probabilities are then computed once per
+batch by the actor's own distribution, exactly as the loss recomputes them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import List, Tuple
+
+import torch
+from tensordict.nn import TensorDictModule
+from torch import nn
+from torchrl.data import Bounded
+from torchrl.modules import ActorValueOperator, IndependentNormal, ProbabilisticActor, TanhNormal, ValueOperator
+from torchrl.modules.distributions.utils import safetanh_noeps
+
+from ppo_torchrl.envs import EnvSpec
+from ppo_torchrl.errors import ConfigError
+
+ACTIVATIONS = {"tanh": nn.Tanh, "relu": nn.ReLU, "elu": nn.ELU}
+HEADS = ("tanh_normal", "normal")
+STD_MODES = ("state_independent", "state_dependent")
+
+
+def _init_linear(layer: nn.Linear, gain: float, ortho: bool) -> nn.Linear:
+    if ortho:
+        nn.init.orthogonal_(layer.weight, gain)
+        nn.init.zeros_(layer.bias)
+    return layer
+
+
+def mlp(in_dim: int, sizes: List[int], activation: str, ortho: bool) -> Tuple[nn.Sequential, int]:
+    """Hidden layers only; returns the module and its output width."""
+    layers: list[nn.Module] = []
+    for size in sizes:
+        layers += [_init_linear(nn.Linear(in_dim, size), math.sqrt(2), ortho), ACTIVATIONS[activation]()]
+        in_dim = size
+    return nn.Sequential(*layers), in_dim
+
+
+class GaussianParams(nn.Module):
+    """features -> (loc, scale). The std is a learned vector or a softplus of the features."""
+
+    def __init__(self, in_dim: int, action_dim: int, cfg):
+        super().__init__()
+        self.loc = _init_linear(nn.Linear(in_dim, action_dim), cfg.policy_head_gain, cfg.ortho_init)
+        self.state_dependent = cfg.std == "state_dependent"
+        self.std_min = float(cfg.std_min)
+        if self.state_dependent:
+            self.scale = _init_linear(nn.Linear(in_dim, action_dim), cfg.policy_head_gain, cfg.ortho_init)
+            # softplus(bias) = exp(log_std_init) at start, like the state-independent default
+            std0 = math.exp(cfg.log_std_init)
+            nn.init.constant_(self.scale.bias, math.log(math.expm1(std0)))
+        else:
+            self.log_std = nn.Parameter(torch.full((action_dim,), float(cfg.log_std_init)))
+
+    def forward(self, features: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor]:
+        loc = self.loc(features)
+        if self.state_dependent:
+            scale = nn.functional.softplus(self.scale(features))
+        else:
+            scale = self.log_std.exp().expand_as(loc)
+        if self.std_min > 0:
+            scale = scale + self.std_min
+        return loc, scale
+
+
+@dataclass
+class ActorCritic:
+    actor: ProbabilisticActor  # reads "observation", writes "action" and "action_log_prob"
+    critic: ValueOperator  # reads "observation", writes "state_value"
+    policy_net: nn.Module  # obs tensor -> (loc, scale), the module inside `actor`
+    head: str
+    action_low: torch.Tensor
+    action_high: torch.Tensor
+
+    def modules(self) -> nn.ModuleDict:
+        return nn.ModuleDict({"actor": self.actor, "critic": self.critic})
+
+
+def validate_policy_config(cfg) -> None:
+    if cfg.head not in HEADS:
+        raise ConfigError(f"policy.head='{cfg.head}' is not allowed; use one of {', '.join(HEADS)}")
+    if cfg.std not in STD_MODES:
+        raise ConfigError(f"policy.std='{cfg.std}' is not allowed; use one of {', '.join(STD_MODES)}")
+    if cfg.activation not in ACTIVATIONS:
+        raise ConfigError(f"policy.activation='{cfg.activation}' is not allowed; use one of {', '.join(ACTIVATIONS)}")
+    if not cfg.hidden_sizes or any(int(s) <= 0 for s in cfg.hidden_sizes):
+        raise ConfigError(f"policy.hidden_sizes={list(cfg.hidden_sizes)} must be a non-empty list of positive widths")
+    if cfg.std_min < 0:
+        raise ConfigError(f"policy.std_min={cfg.std_min} must be >= 0")
+
+
+def make_actor_critic(cfg, spec: EnvSpec, device: torch.device | str = "cpu") -> ActorCritic:
+    """Build the actor and critic from the `policy` config group."""
+    validate_policy_config(cfg)
+    low = torch.as_tensor(spec.action_low)
+    high = torch.as_tensor(spec.action_high)
+    action_spec = Bounded(low=low, high=high, shape=(spec.action_dim,), dtype=torch.float32)
+    if cfg.head == "tanh_normal":
+        dist_class, dist_kwargs = TanhNormal, {"low": low.to(device), "high": high.to(device)}
+    else:
+        dist_class, dist_kwargs = IndependentNormal, {}
+
+    def probabilistic_actor(module: TensorDictModule) -> ProbabilisticActor:
+        return ProbabilisticActor(
+            module,
+            in_keys=["loc", "scale"],
+            spec=action_spec,
+            distribution_class=dist_class,
+            distribution_kwargs=dist_kwargs,
+            return_log_prob=True,
+        )
+
+    if cfg.shared_trunk:
+        trunk, width = mlp(spec.obs_dim, list(cfg.hidden_sizes), cfg.activation, cfg.ortho_init)
+        params = GaussianParams(width, spec.action_dim, cfg)
+        value_head = _init_linear(nn.Linear(width, 1), cfg.value_head_gain, cfg.ortho_init)
+        avo = ActorValueOperator(
+            TensorDictModule(trunk, in_keys=["observation"], out_keys=["hidden"]),
+            probabilistic_actor(TensorDictModule(params, in_keys=["hidden"], out_keys=["loc", "scale"])),
+            ValueOperator(value_head, in_keys=["hidden"]),
+        )
+        actor, critic = avo.get_policy_operator(), avo.get_value_operator()
+        policy_net = nn.Sequential(trunk, params)
+    else:
+        body, width = mlp(spec.obs_dim, list(cfg.hidden_sizes), cfg.activation, cfg.ortho_init)
+        policy_net = nn.Sequential(body, GaussianParams(width, spec.action_dim, cfg))
+        actor = probabilistic_actor(TensorDictModule(policy_net, in_keys=["observation"], out_keys=["loc", "scale"]))
+        cbody, cwidth = mlp(spec.obs_dim, list(cfg.critic_hidden_sizes), cfg.activation, cfg.ortho_init)
+        value_head = _init_linear(nn.Linear(cwidth, 1), cfg.value_head_gain, cfg.ortho_init)
+        critic = ValueOperator(nn.Sequential(cbody, value_head), in_keys=["observation"])
+    actor.to(device)
+    critic.to(device)
+    return ActorCritic(actor, critic, policy_net, cfg.head, low.to(device), high.to(device))
+
+
+def sample_action(ac: ActorCritic, loc: torch.Tensor, scale: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor]:
+    """One draw from the actor's distribution: (action to store, action to send to the env).
+
+    TanhNormal: affine(safe_tanh(loc + scale * eps)) into [low, high], as TorchRL's TanhNormal.
+    Normal: the raw draw is stored (its log-prob is what the loss ratios use) and the env gets
+    it clipped to the bounds.
+    """
+    base = loc + scale * torch.randn_like(loc)
+    if ac.head == "tanh_normal":
+        action = (ac.action_high + ac.action_low) / 2 + (ac.action_high - ac.action_low) / 2 * safetanh_noeps(base)
+        return action, action
+    return base, torch.maximum(torch.minimum(base, ac.action_high), ac.action_low)
+
+
+def deterministic_action(ac: ActorCritic, loc: torch.Tensor) -> torch.Tensor:
+    """The action a deterministic evaluation takes: the mean, squashed or clipped to the bounds."""
+    if ac.head == "tanh_normal":
+        return (ac.action_high + ac.action_low) / 2 + (ac.action_high - ac.action_low) / 2 * safetanh_noeps(loc)
+    return torch.maximum(torch.minimum(loc, ac.action_high), ac.action_low)

@@ -1,0 +1,120 @@
+"""Running statistics for observation and reward normalization.
+
+One implementation of the math serves the fast collector (called with numpy arrays every step) and
+the TorchRL pipeline (`ReturnNormalization` below is a TorchRL `Transform` around the same class).
+The update rule is the parallel mean/variance merge used by SB3's VecNormalize and gymnasium's
+NormalizeObservation/NormalizeReward, so a checkpoint's statistics mean the same thing everywhere.
+"""
+
+from __future__ import annotations
+
+from typing import Dict, Optional
+
+import numpy as np
+import torch
+from tensordict import TensorDictBase
+from torchrl.envs.transforms import Transform
+
+
+class RunningMeanStd:
+    """Mean and variance of a stream of vectors, merged batch by batch."""
+
+    def __init__(self, shape: tuple = (), epsilon: float = 1e-4):
+        self.mean = np.zeros(shape, np.float64)
+        self.var = np.ones(shape, np.float64)
+        self.count = epsilon  # as SB3: avoids a division by zero before the first update
+        self.frozen = False
+
+    def update(self, batch: np.ndarray) -> None:
+        if self.frozen:
+            return
+        batch = np.asarray(batch, np.float64).reshape(-1, *self.mean.shape)
+        b_mean, b_var, b_count = batch.mean(0), batch.var(0), batch.shape[0]
+        delta = b_mean - self.mean
+        total = self.count + b_count
+        self.mean = self.mean + delta * b_count / total
+        m2 = self.var * self.count + b_var * b_count + delta**2 * self.count * b_count / total
+        self.var = m2 / total
+        self.count = total
+
+    def state_dict(self) -> Dict[str, object]:
+        return {"mean": self.mean.copy(), "var": self.var.copy(), "count": float(self.count)}
+
+    def load_state_dict(self, state: Dict[str, object]) -> None:
+        mean = np.asarray(state["mean"], np.float64)
+        if mean.shape != self.mean.shape:
+            raise ValueError(f"normalization stats have shape {mean.shape}, expected {self.mean.shape}")
+        self.mean = mean.copy()
+        self.var = np.asarray(state["var"], np.float64).copy()
+        self.count = float(state["count"])
+
+
+class ObservationNormalizer:
+    """(obs - mean) / sqrt(var + eps), clipped; stats update on every observation unless frozen."""
+
+    def __init__(self, shape: tuple, clip: Optional[float], epsilon: float = 1e-8, enabled: bool = True):
+        self.stats = RunningMeanStd(shape)
+        self.clip = clip
+        self.epsilon = epsilon
+        self.enabled = enabled
+
+    def __call__(self, obs: np.ndarray, update: bool = True) -> np.ndarray:
+        if not self.enabled:
+            return obs.astype(np.float32)
+        if update:
+            self.stats.update(obs)
+        out = (obs - self.stats.mean) / np.sqrt(self.stats.var + self.epsilon)
+        if self.clip is not None:
+            out = np.clip(out, -self.clip, self.clip)
+        return out.astype(np.float32)
+
+
+class ReturnNormalizer:
+    """Scales rewards by the std of the discounted return (not the reward): PPO's reward scaling.
+
+    `returns` is the per-env discounted return so far; it restarts when an episode ends.
+    """
+
+    def __init__(self, num_envs: int, gamma: float, clip: Optional[float], epsilon: float = 1e-8):
+        self.stats = RunningMeanStd(())
+        self.returns = np.zeros(num_envs, np.float64)
+        self.gamma = gamma
+        self.clip = clip
+        self.epsilon = epsilon
+
+    def __call__(self, reward: np.ndarray, done: np.ndarray) -> np.ndarray:
+        self.returns = self.returns * self.gamma + reward
+        self.stats.update(self.returns)
+        self.returns[done] = 0.0
+        return self.scale(reward)
+
+    def scale(self, reward: np.ndarray) -> np.ndarray:
+        out = reward / np.sqrt(self.stats.var + self.epsilon)
+        if self.clip is not None:
+            out = np.clip(out, -self.clip, self.clip)
+        return out
+
+
+class ReturnNormalization(Transform):
+    """TorchRL transform: divide `reward` by the running std of the discounted return.
+
+    TorchRL ships `VecNorm` (reward std) and `RewardScaling` (fixed), not the return-based scaling
+    that PPO's MuJoCo results rely on, so this wraps `ReturnNormalizer` as a transform.
+    """
+
+    def __init__(self, gamma: float, clip: Optional[float], num_envs: int = 1, epsilon: float = 1e-8):
+        super().__init__(in_keys=["reward"], out_keys=["reward"])
+        self.normalizer = ReturnNormalizer(num_envs, gamma, clip, epsilon)
+
+    def _step(self, tensordict: TensorDictBase, next_tensordict: TensorDictBase) -> TensorDictBase:
+        reward = next_tensordict.get("reward")
+        done = next_tensordict.get("done").reshape(-1).cpu().numpy()
+        scaled = self.normalizer(reward.reshape(-1).double().cpu().numpy(), done)
+        next_tensordict.set("reward", torch.as_tensor(scaled, dtype=reward.dtype).reshape(reward.shape))
+        return next_tensordict
+
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:  # offline use: scale only
+        reward = tensordict.get(("next", "reward"))
+        scaled = self.normalizer.scale(reward.double().cpu().numpy())
+        tensordict.set(("next", "reward"), torch.as_tensor(scaled, dtype=reward.dtype))
+        return tensordict

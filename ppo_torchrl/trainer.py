@@ -1,0 +1,335 @@
+"""The training loop: collect -> advantage -> epochs x minibatches -> log / eval / checkpoint.
+
+Reads top to bottom like CleanRL's ppo_continuous_action.py; each component comes from the
+module named like its config group (envs, models, losses, advantage, collector, ...).
+"""
+
+from __future__ import annotations
+
+import math
+import random
+import sys
+import time
+from collections import deque
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+import torch
+from omegaconf import OmegaConf
+from tensordict import TensorDict
+
+from ppo_torchrl import checkpoint
+from ppo_torchrl.advantage import explained_variance, make_advantage
+from ppo_torchrl.checkpoint import CheckpointManager
+from ppo_torchrl.collector import make_collector
+from ppo_torchrl.envs import env_spec, seed_everything
+from ppo_torchrl.errors import ConfigError
+from ppo_torchrl.evaluate import evaluate_policy
+from ppo_torchrl.loggers import MetricsFile, make_logger
+from ppo_torchrl.losses import make_loss
+from ppo_torchrl.models import make_actor_critic
+
+OPTIMIZERS = {"adam": torch.optim.Adam, "adamw": torch.optim.AdamW}
+OBS_NORMS = ("running", "fixed", "none")
+REWARD_NORMS = ("return", "scale", "none")
+CRITIC_LOSSES = ("l2", "l1", "smooth_l1")
+
+# metrics.csv columns, in order; a row leaves the ones it lacks empty.
+COLUMNS = [
+    "iteration", "frames", "time_s", "sps", "lr",
+    "train/episode_return", "train/episode_length", "train/return_last100", "train/episodes",
+    "eval/return_mean", "eval/return_std", "eval/length_mean",
+    "loss/objective", "loss/critic", "loss/entropy", "loss/total",
+    "train/entropy", "train/approx_kl", "train/clipfrac", "train/explained_variance", "train/grad_norm",
+    "policy/loc_mean", "policy/scale_mean", "train/value_mean", "train/advantage_std",
+]
+# TorchRL loss output key -> our metric name
+LOSS_METRICS = {
+    "loss_objective": "loss/objective", "loss_actor": "loss/objective",
+    "loss_critic": "loss/critic", "loss_value": "loss/critic",
+    "loss_entropy": "loss/entropy",
+    "kl_approx": "train/approx_kl", "kl": "train/approx_kl", "clip_fraction": "train/clipfrac",
+}
+
+
+def batch_entropy(dist) -> float:
+    """Mean policy entropy; a one-sample estimate where there is no closed form (TanhNormal)."""
+    try:
+        return dist.entropy().mean().item()
+    except NotImplementedError:
+        return -dist.log_prob(dist.sample()).mean().item()
+
+
+def resolve_device(name: str) -> torch.device:
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if name not in ("cpu", "cuda") and not name.startswith("cuda:"):
+        raise ConfigError(f"device='{name}' is not allowed; use cpu, cuda or auto")
+    if name.startswith("cuda") and not torch.cuda.is_available():
+        raise ConfigError(f"device='{name}' was asked for but no CUDA device is available; use device=cpu or device=auto")
+    return torch.device(name)
+
+
+def validate_config(cfg) -> None:
+    """Range and consistency checks that a type schema cannot express."""
+    _check_keys_against_schema(cfg)
+    c, loss, t = cfg.collector, cfg.loss, cfg.env.transforms
+    checks = [
+        (c.num_envs >= 1, f"collector.num_envs={c.num_envs} must be >= 1"),
+        (c.frames_per_batch >= 1, f"collector.frames_per_batch={c.frames_per_batch} must be >= 1"),
+        (c.frames_per_batch % c.num_envs == 0,
+         f"collector.frames_per_batch={c.frames_per_batch} must be divisible by collector.num_envs={c.num_envs}"),
+        (c.total_frames >= c.frames_per_batch,
+         f"collector.total_frames={c.total_frames} must be >= collector.frames_per_batch={c.frames_per_batch}"),
+        (cfg.optim.lr > 0, f"optim.lr={cfg.optim.lr} must be > 0"),
+        (cfg.optim.eps > 0, f"optim.eps={cfg.optim.eps} must be > 0"),
+        (cfg.optim.max_grad_norm is None or cfg.optim.max_grad_norm > 0,
+         f"optim.max_grad_norm={cfg.optim.max_grad_norm} must be > 0 (or null to disable)"),
+        (cfg.optim.name in OPTIMIZERS, f"optim.name='{cfg.optim.name}' is not known; use one of {', '.join(OPTIMIZERS)}"),
+        (loss.epochs >= 1, f"loss.epochs={loss.epochs} must be >= 1"),
+        (loss.minibatch_size is None or loss.minibatch_size >= 1, f"loss.minibatch_size={loss.minibatch_size} must be >= 1"),
+        (loss.minibatch_size is None or c.frames_per_batch % loss.minibatch_size == 0,
+         f"collector.frames_per_batch={c.frames_per_batch} is not divisible into minibatches of "
+         f"loss.minibatch_size={loss.minibatch_size}"),
+        (loss.clip_epsilon > 0, f"loss.clip_epsilon={loss.clip_epsilon} must be > 0"),
+        (loss.critic_loss in CRITIC_LOSSES, f"loss.critic_loss='{loss.critic_loss}' is not known; use one of {', '.join(CRITIC_LOSSES)}"),
+        (t.obs_norm in OBS_NORMS, f"env.transforms.obs_norm='{t.obs_norm}' is not known; use one of {', '.join(OBS_NORMS)}"),
+        (t.reward_norm in REWARD_NORMS, f"env.transforms.reward_norm='{t.reward_norm}' is not known; use one of {', '.join(REWARD_NORMS)}"),
+        (t.obs_norm_init_frames >= 2, f"env.transforms.obs_norm_init_frames={t.obs_norm_init_frames} must be >= 2"),
+        (cfg.eval.every_frames >= 0 and cfg.eval.episodes >= 1 and cfg.eval.final_episodes >= 0,
+         "eval.every_frames and eval.final_episodes must be >= 0 and eval.episodes >= 1"),
+        (cfg.checkpoint.every_frames >= 0 and cfg.checkpoint.keep_last >= 0,
+         "checkpoint.every_frames and checkpoint.keep_last must be >= 0"),
+        (cfg.torch_threads >= 1, f"torch_threads={cfg.torch_threads} must be >= 1"),
+    ]
+    for ok, message in checks:
+        if not ok:
+            raise ConfigError(message)
+
+
+def _check_keys_against_schema(cfg) -> None:
+    """`+group.key=v` can add a key the schema lacks; such a key would be silently ignored."""
+    from ppo_torchrl.config import Config
+
+    schema = OmegaConf.structured(Config)
+    data = OmegaConf.to_container(cfg, resolve=False)
+    data.pop("hydra", None)
+    try:
+        OmegaConf.merge(schema, data)
+    except Exception as exc:  # omegaconf's key/validation errors carry the full key
+        key = getattr(exc, "full_key", None) or ""
+        raise ConfigError(f"unknown or invalid config key '{key}': {str(exc).splitlines()[0]}") from exc
+
+
+class Trainer:
+    def __init__(self, cfg, run_dir: Path):
+        validate_config(cfg)
+        self.cfg = cfg
+        self.run_dir = Path(run_dir)
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        torch.set_num_threads(cfg.torch_threads)
+        self.device = resolve_device(cfg.device)
+        seed_everything(cfg.seed)
+
+        self.spec = env_spec(cfg.env)
+        self.ac = make_actor_critic(cfg.policy, self.spec, self.device)
+        self.loss_module = make_loss(cfg.loss, self.ac)
+        self.advantage = make_advantage(cfg.advantage, self.ac.critic)
+        self.params = [p for p in self.loss_module.parameters() if p.requires_grad]
+        self.optimizer = OPTIMIZERS[cfg.optim.name](
+            self.params, lr=cfg.optim.lr, eps=cfg.optim.eps, weight_decay=cfg.optim.weight_decay,
+            **({"fused": True} if self.device.type == "cpu" else {}),
+        )
+        self.loss_fn = torch.compile(self.loss_module) if cfg.compile else self.loss_module
+        self.collector = make_collector(cfg, self.ac, cfg.seed, self.device)
+        self.logger = make_logger(cfg.logger, self.run_dir)
+        self.ckpt = CheckpointManager(self.run_dir / "checkpoints", cfg.checkpoint.keep_last, cfg.checkpoint.save_best)
+
+        self.frames = 0
+        self.iteration = 0
+        self.num_iterations = cfg.collector.total_frames // cfg.collector.frames_per_batch
+        self.recent_returns: deque = deque(maxlen=100)
+        self.last_eval: Optional[dict] = None
+        self.train_time = 0.0  # seconds spent collecting and updating (what SPS divides by)
+        self.start_time = time.perf_counter()
+        self._last_print = 0.0
+
+    # ---------------------------------------------------------------- the loop
+    def train(self) -> dict:
+        cfg = self.cfg
+        self.metrics = MetricsFile(self.run_dir / "metrics.csv", COLUMNS)
+        (self.run_dir / "config.yaml").write_text(OmegaConf.to_yaml(cfg, resolve=True))
+        batch_frames = cfg.collector.frames_per_batch
+        try:
+            while self.iteration < self.num_iterations:
+                tick = time.perf_counter()
+                lr = self._set_lr()
+                batch = self.collector.collect()
+                update_stats = self.update(batch)
+                self.frames += batch_frames
+                self.iteration += 1
+                self.train_time += time.perf_counter() - tick
+
+                row = {"iteration": self.iteration, "frames": self.frames, "lr": lr, **update_stats}
+                row.update(self._episode_stats())
+                if self._crossed(cfg.eval.every_frames) and self.iteration < self.num_iterations:
+                    row.update(self._evaluate(cfg.eval.episodes))
+                if self.iteration == self.num_iterations and cfg.eval.final_episodes > 0:
+                    row.update(self._evaluate(cfg.eval.final_episodes))
+                row["time_s"] = time.perf_counter() - self.start_time
+                row["sps"] = self.frames / self.train_time
+                self._log(row)
+                if self._crossed(cfg.checkpoint.every_frames) or self.iteration == self.num_iterations:
+                    self.save_checkpoint(eval_return=row.get("eval/return_mean"))
+                self.write_summary(status="running" if self.iteration < self.num_iterations else "finished")
+        finally:
+            self.metrics.close()
+            self.collector.close()
+        return self.summary(status="finished")
+
+    def _set_lr(self) -> float:
+        cfg = self.cfg.optim
+        frac = 1.0 - self.iteration / self.num_iterations if cfg.anneal_lr else 1.0
+        lr = cfg.lr * frac
+        for group in self.optimizer.param_groups:
+            group["lr"] = lr
+        return lr
+
+    def update(self, batch: TensorDict) -> dict:
+        """Advantages for the batch, then `epochs` passes of shuffled minibatches."""
+        cfg = self.cfg
+        with torch.no_grad():
+            # Old log-probs from the same distribution code the loss uses: the first ratio is exactly 1.
+            dist = self.ac.actor.get_dist(batch)
+            batch.set("action_log_prob", dist.log_prob(batch.get("action")))
+            self.advantage(batch)
+        stats = {
+            "train/entropy": batch_entropy(dist),
+            "policy/loc_mean": batch.get("loc").mean().item(),
+            "policy/scale_mean": batch.get("scale").mean().item(),
+            "train/explained_variance": explained_variance(batch),
+            "train/value_mean": batch.get("state_value").mean().item(),
+            "train/advantage_std": batch.get("advantage").std().item(),
+        }
+        flat = batch.reshape(-1)  # keeps the old loc/scale: KLPENPPOLoss reads them
+        n = flat.numel()
+        mb_size = cfg.loss.minibatch_size or n
+        max_norm = cfg.optim.max_grad_norm
+        outputs, grad_norms = [], []
+        for _ in range(cfg.loss.epochs):
+            perm = torch.randperm(n, device=self.device)
+            for start in range(0, n, mb_size):
+                minibatch = flat[perm[start:start + mb_size]]
+                if cfg.loss.normalize_advantage:
+                    adv = minibatch.get("advantage")
+                    minibatch.set("advantage", (adv - adv.mean()) / (adv.std() + 1e-8))
+                out = self.loss_fn(minibatch)
+                loss = sum(v for k, v in out.items() if k.startswith("loss_"))
+                self.optimizer.zero_grad(set_to_none=True)
+                loss.backward()
+                if max_norm is not None:
+                    grad_norms.append(torch.nn.utils.clip_grad_norm_(self.params, max_norm))
+                self.optimizer.step()
+                outputs.append(out.detach().set("loss_total", loss.detach()))
+        stacked = torch.stack(outputs)
+        for key in stacked.keys():
+            name = LOSS_METRICS.get(key, "loss/total" if key == "loss_total" else None)
+            if name is not None:
+                stats[name] = stacked.get(key).float().mean().item()
+        if grad_norms:
+            stats["train/grad_norm"] = torch.stack(grad_norms).mean().item()
+        return stats
+
+    # ---------------------------------------------------------------- bookkeeping
+    def _crossed(self, every: int) -> bool:
+        """True on the iteration whose frames cross a multiple of `every`."""
+        if every <= 0:
+            return False
+        step = self.cfg.collector.frames_per_batch
+        return self.frames // every > (self.frames - step) // every
+
+    def _episode_stats(self) -> dict:
+        finished = self.collector.pop_episodes()
+        for ret, _ in finished:
+            self.recent_returns.append(ret)
+        stats = {"train/episodes": len(finished)}
+        if finished:
+            stats["train/episode_return"] = float(np.mean([r for r, _ in finished]))
+            stats["train/episode_length"] = float(np.mean([n for _, n in finished]))
+        if self.recent_returns:
+            stats["train/return_last100"] = float(np.mean(self.recent_returns))
+        return stats
+
+    def _evaluate(self, episodes: int) -> dict:
+        result = evaluate_policy(self.cfg, self.ac, self.collector.obs_stats(), episodes,
+                                 seed=self.cfg.seed + 10_000, deterministic=self.cfg.eval.deterministic)
+        self.last_eval = {"frames": self.frames, **result}
+        return {"eval/return_mean": result["return_mean"], "eval/return_std": result["return_std"],
+                "eval/length_mean": result["length_mean"]}
+
+    def _log(self, row: dict) -> None:
+        self.metrics.write(row)
+        if self.logger is not None:
+            for key, value in row.items():
+                if key not in ("iteration", "frames") and value is not None and not (isinstance(value, float) and math.isnan(value)):
+                    self.logger.log_scalar(key, value, step=self.frames)
+        now = time.perf_counter()
+        if now - self._last_print >= self.cfg.logger.print_every_s or self.iteration == self.num_iterations or "eval/return_mean" in row:
+            self._last_print = now
+            parts = [f"frames {self.frames:>9d}/{self.num_iterations * self.cfg.collector.frames_per_batch}",
+                     f"sps {row['sps']:6.0f}"]
+            if "train/return_last100" in row:
+                parts.append(f"return(last100) {row['train/return_last100']:8.1f}")
+            if "eval/return_mean" in row:
+                parts.append(f"eval {row['eval/return_mean']:8.1f} +- {row['eval/return_std']:.1f}")
+            print(" | ".join(parts), flush=True)
+
+    def state_dict(self) -> dict:
+        return {
+            "actor": self.ac.actor.state_dict(),
+            "critic": self.ac.critic.state_dict(),
+            "loss_module": self.loss_module.state_dict(),
+            "optimizer": self.optimizer.state_dict(),
+            "normalization": self.collector.state_dict(),
+            "frames": self.frames,
+            "iteration": self.iteration,
+            "spec": {"obs_dim": self.spec.obs_dim, "action_dim": self.spec.action_dim},
+            "rng": {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "python": random.getstate()},
+            "config": OmegaConf.to_container(self.cfg, resolve=True),
+            "last_eval": self.last_eval,
+        }
+
+    def save_checkpoint(self, eval_return: Optional[float] = None) -> Path:
+        return self.ckpt.save(self.state_dict(), eval_return)
+
+    def summary(self, status: str) -> dict:
+        last_eval = self.last_eval or {}
+        return {
+            "env": self.cfg.env.id,
+            "seed": self.cfg.seed,
+            "loss": self.cfg.loss.name,
+            "policy": self.cfg.policy.head,
+            "status": status,
+            "frames": self.frames,
+            "iterations": self.iteration,
+            "wall_s": round(time.perf_counter() - self.start_time, 3),
+            "train_s": round(self.train_time, 3),
+            "sps": round(self.frames / self.train_time, 1) if self.train_time else None,
+            "eval_return_mean": last_eval.get("return_mean"),
+            "eval_return_std": last_eval.get("return_std"),
+            "eval_frames": last_eval.get("frames"),
+            "train_return_last100": float(np.mean(self.recent_returns)) if self.recent_returns else None,
+            "best_eval_return": self.ckpt.best_return,
+            "run_dir": str(self.run_dir),
+        }
+
+    def write_summary(self, status: str) -> None:
+        checkpoint.atomic_write_json(self.run_dir / "summary.json", self.summary(status))
+
+
+def train(cfg, run_dir: Path) -> dict:
+    trainer = Trainer(cfg, run_dir)
+    summary = trainer.train()
+    print(f"run dir: {run_dir}", file=sys.stderr)
+    return summary

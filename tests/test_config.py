@@ -1,0 +1,81 @@
+import pytest
+from omegaconf.errors import ConfigAttributeError, ConfigKeyError, ValidationError
+from hydra.errors import ConfigCompositionException
+
+from ppo_torchrl.errors import ConfigError
+from ppo_torchrl.trainer import validate_config
+
+from conftest import compose_config
+
+
+def test_defaults_reproduce_the_cleanrl_mujoco_settings():
+    cfg = compose_config(["env=Hopper-v4"])
+    assert cfg.env.id == "Hopper-v4"
+    assert (cfg.collector.frames_per_batch, cfg.collector.total_frames, cfg.collector.num_envs) == (2048, 1_000_000, 1)
+    assert (cfg.loss.name, cfg.loss.epochs, cfg.loss.minibatch_size) == ("clip_ppo", 10, 64)
+    assert cfg.collector.frames_per_batch // cfg.loss.minibatch_size == 32
+    assert (cfg.loss.clip_epsilon, cfg.loss.entropy_coef, cfg.loss.critic_coef) == (0.2, 0.0, 0.5)
+    assert (cfg.advantage.gamma, cfg.advantage.lmbda) == (0.99, 0.95)
+    assert (cfg.optim.lr, cfg.optim.eps, cfg.optim.max_grad_norm, cfg.optim.anneal_lr) == (3e-4, 1e-5, 0.5, True)
+    assert list(cfg.policy.hidden_sizes) == [64, 64] and cfg.policy.activation == "tanh"
+    assert (cfg.policy.policy_head_gain, cfg.policy.value_head_gain) == (0.01, 1.0)
+    assert (cfg.env.transforms.obs_norm, cfg.env.transforms.reward_norm) == ("running", "return")
+    assert (cfg.env.transforms.obs_clip, cfg.env.transforms.reward_clip) == (10.0, 10.0)
+    validate_config(cfg)
+
+
+@pytest.mark.parametrize("env", ["Hopper", "HalfCheetah", "Walker2d", "Ant", "Humanoid", "InvertedPendulum"])
+@pytest.mark.parametrize("version", ["v4", "v5"])
+def test_every_env_file_composes(env, version):
+    assert compose_config([f"env={env}-{version}"]).env.id == f"{env}-{version}"
+
+
+def test_group_swaps_by_name():
+    cfg = compose_config(["loss=kl_ppo", "policy=tanh_normal", "optim.lr=1e-3", "seed=7"])
+    assert (cfg.loss.name, cfg.policy.head, cfg.optim.lr, cfg.seed) == ("kl_ppo", "tanh_normal", 1e-3, 7)
+    a2c = compose_config(["loss=a2c"])
+    assert a2c.loss.epochs == 1 and a2c.loss.minibatch_size is None
+
+
+def test_generic_env_takes_any_id():
+    assert compose_config(["env=gym", "env.id=Swimmer-v4"]).env.id == "Swimmer-v4"
+
+
+@pytest.mark.parametrize(
+    "override",
+    ["seed=notanint", "collector.frames_per_batch=abc", "optim.lr=fast", "loss.epochs=1.5"],
+)
+def test_wrong_type_fails_at_compose(override):
+    with pytest.raises((ConfigCompositionException, ValidationError)):
+        compose_config([override])
+
+
+@pytest.mark.parametrize("override", ["loss.clip_eps=0.1", "collector.frames=10"])
+def test_unknown_key_fails_at_compose(override):
+    with pytest.raises((ConfigCompositionException, ConfigAttributeError, ConfigKeyError)):
+        compose_config([override])
+
+
+def test_key_added_with_plus_fails_validation():
+    with pytest.raises(ConfigError, match="optim.momentum"):
+        validate_config(compose_config(["+optim.momentum=0.9"]))
+
+
+def test_unknown_group_option_fails():
+    with pytest.raises(ConfigCompositionException, match="loss"):
+        compose_config(["loss=trpo"])
+
+
+@pytest.mark.parametrize(
+    "override, message",
+    [
+        ("optim.lr=-1", "optim.lr"),
+        ("collector.frames_per_batch=1000", "minibatch"),
+        ("collector.total_frames=100", "total_frames"),
+        ("env.transforms.obs_norm=whiten", "obs_norm"),
+        ("collector.num_envs=3", "num_envs"),
+    ],
+)
+def test_out_of_range_values_are_config_errors(override, message):
+    with pytest.raises(ConfigError, match=message):
+        validate_config(compose_config([override]))
