@@ -24,6 +24,7 @@ def _ppo_kwargs(cfg) -> dict:
         loss_critic_type=cfg.critic_loss,
         normalize_advantage=False,  # the trainer normalizes per minibatch, the same for every loss
         clip_value=cfg.clip_value,
+        functional=False,  # use the modules' own parameters: no per-call parameter re-wrapping
     )
 
 
@@ -49,12 +50,14 @@ def _a2c(cfg, ac: ActorCritic) -> LossModule:
         critic_coeff=cfg.critic_coef,
         loss_critic_type=cfg.critic_loss,
         clip_value=cfg.clip_value,
+        functional=False,
     )
 
 
 def _reinforce(cfg, ac: ActorCritic) -> LossModule:
     # REINFORCE with the critic as a baseline; the advantage comes from the trainer's estimator.
-    return ReinforceLoss(ac.actor, ac.critic, loss_critic_type=cfg.critic_loss, clip_value=cfg.clip_value)
+    return ReinforceLoss(ac.actor, ac.critic, loss_critic_type=cfg.critic_loss, clip_value=cfg.clip_value,
+                         functional=False)
 
 
 LOSSES: Dict[str, Callable[[object, ActorCritic], LossModule]] = {
