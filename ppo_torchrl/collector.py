@@ -165,19 +165,16 @@ class TorchRLCollector:
     """`torchrl.collectors.Collector` over `TransformedEnv(GymEnv)`, same batch layout."""
 
     def __init__(self, cfg, ac: ActorCritic, seed: int, device: torch.device):
-        env_cfg = cfg.env
-        if cfg.collector.num_envs > 1:
-            env_cfg = _with_make_kwargs(env_cfg, num_envs=cfg.collector.num_envs)
-        self.env = make_torchrl_env(
-            env_cfg, clip_actions=ac.head == "normal", gamma=cfg.advantage.gamma, train=True, device="cpu"
-        )
+        self.env = make_torchrl_env(cfg.env, clip_actions=ac.head == "normal", gamma=cfg.advantage.gamma,
+                                    train=True, device="cpu", num_envs=cfg.collector.num_envs)
         self.env.set_seed(seed)
         self.collector = Collector(
             self.env,
             ac.actor,
             frames_per_batch=cfg.collector.frames_per_batch,
             total_frames=-1,
-            device=device,
+            policy_device=device,
+            env_device="cpu",
             storing_device=device,
         )
         self._iterator = iter(self.collector)
@@ -185,10 +182,8 @@ class TorchRLCollector:
 
     def collect(self) -> TensorDict:
         batch = next(self._iterator)
-        if batch.ndim == 1:
+        if batch.ndim == 1:  # one env: [steps] -> [1, steps]; batched envs come as [num_envs, steps]
             batch = batch.unsqueeze(0)
-        else:  # Collector puts time last for batched envs already: [num_envs, steps]
-            pass
         done = batch.get(("next", "done")).squeeze(-1)
         returns = batch.get(("next", "episode_reward"))[done].reshape(-1).tolist()
         lengths = batch.get(("next", "step_count"))[done].reshape(-1).tolist()
@@ -227,14 +222,6 @@ class TorchRLCollector:
 
     def close(self) -> None:
         self.collector.shutdown()
-
-
-def _with_make_kwargs(env_cfg, **extra):
-    from omegaconf import OmegaConf
-
-    new = OmegaConf.to_container(env_cfg, resolve=True) if OmegaConf.is_config(env_cfg) else dict(env_cfg)
-    new["make_kwargs"] = {**(new.get("make_kwargs") or {}), **extra}
-    return OmegaConf.create(new)
 
 
 def make_collector(cfg, ac: ActorCritic, seed: int, device: torch.device):

@@ -8,6 +8,7 @@ Two ways to step an env share these builders:
 
 from __future__ import annotations
 
+import functools
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,6 +26,7 @@ from torchrl.envs import (
     RewardClipping,
     RewardScaling,
     RewardSum,
+    SerialEnv,
     StepCounter,
     Transform,
     TransformedEnv,
@@ -106,6 +108,7 @@ def make_torchrl_env(
     train: bool = True,
     render_mode: Optional[str] = None,
     device: str = "cpu",
+    num_envs: int = 1,
 ) -> TransformedEnv:
     """`TransformedEnv(GymEnv)` with the configured transforms.
 
@@ -122,7 +125,11 @@ def make_torchrl_env(
     if render_mode is not None:
         kwargs["render_mode"] = render_mode
         kwargs["from_pixels"] = False
-    base = GymEnv(env_cfg.id, device=device, disable_env_checker=True, **kwargs)
+    if num_envs == 1:
+        base = GymEnv(env_cfg.id, device=device, disable_env_checker=True, **kwargs)
+    else:  # one process, envs stepped in turn (the simulator is fast; processes would cost more)
+        base = SerialEnv(num_envs, functools.partial(GymEnv, env_cfg.id, device=device,
+                                                     disable_env_checker=True, **kwargs))
     transforms = []
     if clip_actions:  # Normal head: the env gets the clipped action, the batch keeps the sample
         spec = base.action_spec
@@ -131,7 +138,8 @@ def make_torchrl_env(
     transforms += [DoubleToFloat(), RewardSum(), StepCounter()]
     obs_norm = None
     if t.obs_norm == "running" and train:
-        obs_norm = VecNorm(in_keys=["observation"], decay=1.0, eps=t.norm_epsilon, new_api=True)
+        obs_norm = VecNorm(in_keys=["observation"], decay=1.0, eps=t.norm_epsilon, new_api=True,
+                           reduce_batch_dims=True)  # one set of stats shared by all envs
     elif t.obs_norm == "fixed" and train and obs_stats is None:
         obs_norm = ObservationNorm(in_keys=["observation"], standard_normal=True)
     elif t.obs_norm != "none":
@@ -144,7 +152,7 @@ def make_torchrl_env(
             transforms.append(ClipTransform(in_keys=["observation"], low=-t.obs_clip, high=t.obs_clip))
     if train:
         if t.reward_norm == "return":
-            transforms.append(ReturnNormalization(gamma=gamma, clip=None, epsilon=t.norm_epsilon))
+            transforms.append(ReturnNormalization(gamma=gamma, clip=None, num_envs=num_envs, epsilon=t.norm_epsilon))
         elif t.reward_norm == "scale":
             transforms.append(RewardScaling(loc=0.0, scale=t.reward_scale))
         if t.reward_norm != "none" and t.reward_clip is not None:

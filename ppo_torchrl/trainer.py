@@ -148,7 +148,8 @@ class Trainer:
 
         self.frames = 0
         self.iteration = 0
-        self.num_iterations = cfg.collector.total_frames // cfg.collector.frames_per_batch
+        # At least total_frames, as SB3's learn(): 1M frames at 2048 per batch is 489 batches.
+        self.num_iterations = math.ceil(cfg.collector.total_frames / cfg.collector.frames_per_batch)
         self.recent_returns: deque = deque(maxlen=100)
         self.last_eval: Optional[dict] = None
         self.train_time = 0.0  # seconds spent collecting and updating (what SPS divides by)

@@ -31,9 +31,13 @@ def test_every_loss_and_head_trains(tiny_cfg, tmp_path, loss, head):
         assert column in header
 
 
-def test_torchrl_collector_backend_trains(tiny_cfg, tmp_path):
-    summary = Trainer(tiny_cfg("collector.backend=torchrl"), tmp_path).train()
+@pytest.mark.parametrize("num_envs", [1, 2])
+def test_torchrl_collector_backend_trains(tiny_cfg, tmp_path, num_envs):
+    trainer = Trainer(tiny_cfg("collector.backend=torchrl", f"collector.num_envs={num_envs}"), tmp_path)
+    summary = trainer.train()
     assert summary["frames"] == 512 and summary["train_return_last100"] is not None
+    assert trainer.collector.obs_stats()["mean"].shape == (4,)  # one set of stats for all envs
+    assert summary["eval_return_mean"] is not None
 
 
 def test_several_envs_and_shared_trunk(tiny_cfg, tmp_path):
