@@ -9,7 +9,7 @@ from __future__ import annotations
 import csv
 import math
 from pathlib import Path
-from typing import Dict, List, Optional
+from typing import Dict, List
 
 from ppo_torchrl.errors import ConfigError
 
@@ -29,14 +29,11 @@ def make_logger(cfg, run_dir: Path):
 class MetricsFile:
     """Append-only CSV with a fixed header; columns missing from a row are left empty."""
 
-    def __init__(self, path: Path, columns: List[str], append: bool = False):
+    def __init__(self, path: Path, columns: List[str]):
         self.path = Path(path)
-        self.columns = columns
-        mode = "a" if append and self.path.exists() else "w"
-        self._file = open(self.path, mode, newline="")
+        self._file = open(self.path, "w", newline="")
         self._writer = csv.DictWriter(self._file, fieldnames=columns, extrasaction="ignore")
-        if mode == "w":
-            self._writer.writeheader()
+        self._writer.writeheader()
 
     def write(self, row: Dict[str, float]) -> None:
         self._writer.writerow({k: _fmt(v) for k, v in row.items()})
@@ -52,8 +49,3 @@ def _fmt(value) -> str:
     if isinstance(value, float):
         return f"{value:.6g}"
     return str(value)
-
-
-def read_metrics(path: Path) -> List[Dict[str, Optional[float]]]:
-    with open(path, newline="") as f:
-        return [{k: (float(v) if v not in ("", None) else None) for k, v in row.items()} for row in csv.DictReader(f)]

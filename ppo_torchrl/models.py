@@ -79,9 +79,6 @@ class ActorCritic:
     action_low: torch.Tensor
     action_high: torch.Tensor
 
-    def modules(self) -> nn.ModuleDict:
-        return nn.ModuleDict({"actor": self.actor, "critic": self.critic})
-
 
 def validate_policy_config(cfg) -> None:
     if cfg.head not in HEADS:

@@ -112,9 +112,3 @@ class ReturnNormalization(Transform):
         scaled = self.normalizer(reward.reshape(-1).double().cpu().numpy(), done)
         next_tensordict.set("reward", torch.as_tensor(scaled, dtype=reward.dtype).reshape(reward.shape))
         return next_tensordict
-
-    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:  # offline use: scale only
-        reward = tensordict.get(("next", "reward"))
-        scaled = self.normalizer.scale(reward.double().cpu().numpy())
-        tensordict.set(("next", "reward"), torch.as_tensor(scaled, dtype=reward.dtype))
-        return tensordict
