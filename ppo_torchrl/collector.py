@@ -26,7 +26,7 @@ from torchrl.envs import ObservationNorm
 from ppo_torchrl.envs import make_gym_env, make_torchrl_env, torchrl_obs_stats
 from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.models import ActorCritic, sample_action
-from ppo_torchrl.normalization import ObservationNormalizer, ReturnNormalization, ReturnNormalizer
+from ppo_torchrl.normalization import ObservationNormalizer, ReturnNormalization, ReturnNormalizer, clip
 
 BACKENDS = ("fast", "torchrl")
 
@@ -68,8 +68,7 @@ class FastCollector:
         if self.reward_mode == "return":
             return self.return_norm(reward, done)
         if self.reward_mode == "scale":
-            reward = reward * self.reward_scale
-            return np.clip(reward, -self.reward_clip, self.reward_clip) if self.reward_clip is not None else reward
+            return clip(reward * self.reward_scale, self.reward_clip)
         return reward
 
     @torch.no_grad()

@@ -16,6 +16,11 @@ from tensordict import TensorDictBase
 from torchrl.envs.transforms import Transform
 
 
+def clip(x: np.ndarray, bound: Optional[float]) -> np.ndarray:
+    """Clip to [-bound, bound]; None leaves x as it is."""
+    return x if bound is None else np.clip(x, -bound, bound)
+
+
 class RunningMeanStd:
     """Mean and variance of a stream of vectors, merged batch by batch."""
 
@@ -64,9 +69,7 @@ class ObservationNormalizer:
         if update:
             self.stats.update(obs)
         out = (obs - self.stats.mean) / np.sqrt(self.stats.var + self.epsilon)
-        if self.clip is not None:
-            out = np.clip(out, -self.clip, self.clip)
-        return out.astype(np.float32)
+        return clip(out, self.clip).astype(np.float32)
 
 
 class ReturnNormalizer:
@@ -89,10 +92,7 @@ class ReturnNormalizer:
         return self.scale(reward)
 
     def scale(self, reward: np.ndarray) -> np.ndarray:
-        out = reward / np.sqrt(self.stats.var + self.epsilon)
-        if self.clip is not None:
-            out = np.clip(out, -self.clip, self.clip)
-        return out
+        return clip(reward / np.sqrt(self.stats.var + self.epsilon), self.clip)
 
 
 class ReturnNormalization(Transform):

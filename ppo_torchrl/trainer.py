@@ -172,18 +172,19 @@ class Trainer:
                 self.iteration += 1
                 self.train_time += time.perf_counter() - tick
 
+                last = self.iteration == self.num_iterations
                 row = {"iteration": self.iteration, "frames": self.frames, "lr": lr, **update_stats}
                 row.update(self._episode_stats())
-                if self._crossed(cfg.eval.every_frames) and self.iteration < self.num_iterations:
-                    row.update(self._evaluate(cfg.eval.episodes))
-                if self.iteration == self.num_iterations and cfg.eval.final_episodes > 0:
+                if last and cfg.eval.final_episodes > 0:
                     row.update(self._evaluate(cfg.eval.final_episodes))
+                elif not last and self._crossed(cfg.eval.every_frames):
+                    row.update(self._evaluate(cfg.eval.episodes))
                 row["time_s"] = time.perf_counter() - self.start_time
                 row["sps"] = self.frames / self.train_time
-                self._log(row)
-                if self._crossed(cfg.checkpoint.every_frames) or self.iteration == self.num_iterations:
+                self._log(row, last)
+                if last or self._crossed(cfg.checkpoint.every_frames):
                     self.save_checkpoint(eval_return=row.get("eval/return_mean"))
-                self.write_summary(status="running" if self.iteration < self.num_iterations else "finished")
+                self.write_summary(status="finished" if last else "running")
         finally:
             self.metrics.close()
             self.collector.close()
@@ -269,14 +270,14 @@ class Trainer:
         return {"eval/return_mean": result["return_mean"], "eval/return_std": result["return_std"],
                 "eval/length_mean": result["length_mean"]}
 
-    def _log(self, row: dict) -> None:
+    def _log(self, row: dict, last: bool) -> None:
         self.metrics.write(row)
         if self.logger is not None:
             for key, value in row.items():
                 if key not in ("iteration", "frames") and value is not None and not (isinstance(value, float) and math.isnan(value)):
                     self.logger.log_scalar(key, value, step=self.frames)
         now = time.perf_counter()
-        if now - self._last_print >= self.cfg.logger.print_every_s or self.iteration == self.num_iterations or "eval/return_mean" in row:
+        if last or "eval/return_mean" in row or now - self._last_print >= self.cfg.logger.print_every_s:
             self._last_print = now
             parts = [f"frames {self.frames:>9d}/{self.num_iterations * self.cfg.collector.frames_per_batch}",
                      f"sps {row['sps']:6.0f}"]
@@ -290,7 +291,9 @@ class Trainer:
         return {
             "actor": self.ac.actor.state_dict(),
             "critic": self.ac.critic.state_dict(),
-            "loss_module": self.loss_module.state_dict(),
+            # the loss's own state (e.g. the KL penalty's beta); the weights are saved once, above
+            "loss_module": {k: v for k, v in self.loss_module.state_dict().items()
+                            if not k.startswith(("actor_network", "critic_network"))},
             "optimizer": self.optimizer.state_dict(),
             "normalization": self.collector.state_dict(),
             "frames": self.frames,
