@@ -34,7 +34,10 @@ class RunningMeanStd:
         if self.frozen:
             return
         batch = np.asarray(batch, np.float64).reshape(-1, *self.mean.shape)
-        b_mean, b_var, b_count = batch.mean(0), batch.var(0), batch.shape[0]
+        if batch.shape[0] == 1:  # the per-step case: the same merge, without numpy's reductions
+            b_mean, b_var, b_count = batch[0], 0.0, 1
+        else:
+            b_mean, b_var, b_count = batch.mean(0), batch.var(0), batch.shape[0]
         delta = b_mean - self.mean
         total = self.count + b_count
         self.mean = self.mean + delta * b_count / total
