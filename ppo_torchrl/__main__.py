@@ -1,7 +1,8 @@
 """`python -m ppo_torchrl env=Hopper-v4 [overrides]`: train PPO, or sweep with `-m`.
 
-Returns the final deterministic eval return (falling back to the last-100 training return), the
-value a Hydra sweeper such as Optuna maximizes.
+`resume=<run dir> [collector.total_frames=N]` continues a run in its own directory. Returns the
+final deterministic eval return (falling back to the last-100 training return), the value a Hydra
+sweeper such as Optuna maximizes.
 """
 
 from __future__ import annotations
@@ -13,22 +14,32 @@ import hydra
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig
 
-from ppo_torchrl import config as _config  # noqa: F401  (registers the schemas)
+from ppo_torchrl.config import resume_config
 from ppo_torchrl.envs import check_env_id, env_files
-from ppo_torchrl.errors import ConfigError, report_and_exit
+from ppo_torchrl.errors import ConfigError, Interrupted, TrainingError, report_and_exit
 
 CONF_DIR = str(Path(__file__).resolve().parent.parent / "conf")
+HYDRA_FLAGS_WITHOUT_RUN = ("--cfg", "-c", "--help", "-h", "--hydra-help", "--info", "-i", "--version",
+                           "--shell-completion", "-sc", "--resolve", "-p", "--package")
 
 
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")
 def main(cfg: DictConfig) -> float:
+    from ppo_torchrl import checkpoint
     from ppo_torchrl.trainer import train
 
-    run_dir = Path(HydraConfig.get().runtime.output_dir)
     try:
+        state = None
+        if cfg.resume:
+            run_dir = Path(cfg.resume)
+            user = [o for o in HydraConfig.get().overrides.task if not o.startswith("resume=")]
+            cfg = resume_config(run_dir, user)
+            state = checkpoint.load(run_dir / "checkpoints" / checkpoint.LAST)
+        else:
+            run_dir = Path(HydraConfig.get().runtime.output_dir)
         check_env_id(cfg.env.id)
-        summary = train(cfg, run_dir)
-    except ConfigError as error:
+        summary = train(cfg, run_dir, state)
+    except (ConfigError, TrainingError, Interrupted) as error:
         report_and_exit(error)
     for key in ("eval_return_mean", "train_return_last100"):
         if summary.get(key) is not None:
@@ -36,9 +47,9 @@ def main(cfg: DictConfig) -> float:
     return float("-inf")
 
 
-def check_env_override(argv: list[str]) -> None:
+def check_env_override(args: list[str]) -> None:
     """`env=<name>` must name a file in conf/env; say which exist and how to use any other id."""
-    for arg in argv:
+    for arg in args:
         if arg.startswith("env=") and "," not in arg:
             name = arg.split("=", 1)[1]
             available = env_files()
@@ -50,9 +61,65 @@ def check_env_override(argv: list[str]) -> None:
                 )
 
 
-if __name__ == "__main__":
+def check_resume(args: list[str]) -> list[str]:
+    """`resume=<dir>` must be a run dir with a checkpoint; the job then runs in that dir."""
+    for arg in args:
+        if arg.startswith("resume="):
+            run_dir = Path(arg.split("=", 1)[1]).expanduser()
+            if not run_dir.is_dir():
+                raise ConfigError(f"resume={run_dir}: no such directory; give the run dir of an earlier run")
+            if not (run_dir / "config.yaml").is_file() or not (run_dir / "checkpoints" / "last.pt").is_file():
+                raise ConfigError(f"resume={run_dir} is not a ppo_torchrl run dir: it needs config.yaml and "
+                                  "checkpoints/last.pt")
+            # Keep the run's own .hydra/ as it was: the saved config is the one that resumes.
+            return [f"hydra.run.dir={run_dir}", "hydra.output_subdir=null"]
+    return []
+
+
+def check_composes(args: list[str]) -> None:
+    """Compose the config as Hydra will, so a bad override is one line, not Hydra's report."""
+    from hydra import compose, initialize_config_dir
+    from hydra.errors import HydraException
+    from omegaconf.errors import OmegaConfBaseException
+
+    overrides = [a for a in args if not a.startswith(("-", "hydra.", "hydra/", "+hydra", "~hydra"))]
     try:
-        check_env_override(sys.argv[1:])
+        with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
+            compose(config_name="config", overrides=overrides)
+    except (HydraException, OmegaConfBaseException) as exc:
+        raise ConfigError(one_line(exc)) from exc
+
+
+def one_line(exc: BaseException) -> str:
+    """Hydra's multi-line messages, folded: what failed, then the first line of why."""
+    lines = [l.strip() for l in str(exc).splitlines() if l.strip()]
+    head, options = [], []
+    for line in lines:
+        if line.startswith("Config search path"):
+            break  # where Hydra looked: noise to a user
+        (options if options or line.startswith("Available options") else head).append(line)
+    message = head[0].rstrip(".") if head else type(exc).__name__
+    cause = exc.__cause__
+    if cause is not None and str(cause).strip():
+        message += f": {str(cause).strip().splitlines()[0]}"
+        key = getattr(cause, "full_key", None)
+        if key and key not in message:
+            message += f" (key '{key}')"
+    elif len(head) > 1 and "append" not in head[1]:
+        message += f": {head[1]}"
+    if options:
+        message += f". {options[0].rstrip(':')}: {', '.join(options[1:])}"
+    return message
+
+
+if __name__ == "__main__":
+    argv = sys.argv[1:]
+    multirun = "-m" in argv or "--multirun" in argv
+    try:
+        check_env_override(argv)
+        sys.argv += check_resume(argv)
+        if not multirun and not any(a.split("=")[0] in HYDRA_FLAGS_WITHOUT_RUN for a in argv):
+            check_composes(argv)
     except ConfigError as err:
         report_and_exit(err)
     main()

@@ -23,7 +23,7 @@ from tensordict import TensorDict
 from torchrl.collectors import Collector
 from torchrl.envs import ObservationNorm
 
-from ppo_torchrl.envs import make_gym_env, make_torchrl_env, torchrl_obs_stats
+from ppo_torchrl.envs import get_env_state, make_gym_env, make_torchrl_env, set_env_state, torchrl_obs_stats
 from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.models import ActorCritic, sample_action
 from ppo_torchrl.normalization import ObservationNormalizer, ReturnNormalization, ReturnNormalizer, clip
@@ -147,13 +147,33 @@ class FastCollector:
         return self.obs_norm.stats.state_dict() if self.obs_norm.enabled else None
 
     def state_dict(self) -> dict:
-        return {"obs": self.obs_stats(), "return": self.return_norm.stats.state_dict()}
+        """Normalization stats, plus where each env is, so a resumed run continues bit-exactly."""
+        return {
+            "obs": self.obs_stats(),
+            "obs_frozen": self.obs_norm.stats.frozen,
+            "return": self.return_norm.stats.state_dict(),
+            "running_returns": self.return_norm.returns.copy(),
+            "envs": [get_env_state(env) for env in self.envs],
+            "current_obs": self._obs.copy(),
+            "episode_return": self._episode_return.copy(),
+            "episode_length": self._episode_length.copy(),
+        }
 
     def load_state_dict(self, state: dict) -> None:
+        """Stats always; env positions too when the checkpoint has them for as many envs."""
         if state.get("obs") is not None and self.obs_norm.enabled:
             self.obs_norm.stats.load_state_dict(state["obs"])
+            self.obs_norm.stats.frozen = bool(state.get("obs_frozen", False))
         if state.get("return") is not None:
             self.return_norm.stats.load_state_dict(state["return"])
+        envs = state.get("envs")
+        if envs is not None and len(envs) == self.num_envs and state["current_obs"].shape == self._obs.shape:
+            for env, env_state in zip(self.envs, envs):
+                set_env_state(env, env_state)
+            self._obs = state["current_obs"].copy()
+            self._episode_return = state["episode_return"].copy()
+            self._episode_length = state["episode_length"].copy()
+            self.return_norm.returns = state["running_returns"].copy()
 
     def close(self) -> None:
         for env in self.envs:

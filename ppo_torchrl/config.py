@@ -155,6 +155,7 @@ class Config:
     device: str = "cpu"  # cpu | cuda | auto: networks and the update; the simulator stays on CPU
     torch_threads: int = 1  # small MLPs run fastest single-threaded
     compile: bool = False  # torch.compile the loss
+    resume: Optional[str] = None  # a run dir: continue it from checkpoints/last.pt
 
 
 def register_configs() -> None:
@@ -163,3 +164,25 @@ def register_configs() -> None:
 
 
 register_configs()
+
+
+def resume_config(run_dir, overrides):
+    """The saved config of `run_dir` with this command's `key=value` overrides applied on top."""
+    from pathlib import Path
+
+    from omegaconf import OmegaConf
+
+    from ppo_torchrl.errors import ConfigError
+
+    saved = OmegaConf.load(Path(run_dir) / "config.yaml")
+    cfg = OmegaConf.merge(OmegaConf.structured(Config), saved)
+    for override in overrides:
+        try:
+            cfg = OmegaConf.merge(cfg, OmegaConf.from_dotlist([override]))
+        except Exception as exc:
+            raise ConfigError(
+                f"resume: cannot apply '{override}' to the saved config ({str(exc).splitlines()[0]}); "
+                "on resume only key=value overrides of existing keys apply, e.g. collector.total_frames=N"
+            ) from exc
+    cfg.resume = str(run_dir)
+    return cfg

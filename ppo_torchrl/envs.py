@@ -209,3 +209,45 @@ def seed_everything(seed: int) -> None:
 
 def episode_seeds(seed: int, n: int) -> Sequence[int]:
     return [seed * 1000 + i for i in range(n)]
+
+
+def _find_wrapper(env: gym.Env, kind: type) -> Optional[gym.Wrapper]:
+    while isinstance(env, gym.Wrapper):
+        if isinstance(env, kind):
+            return env
+        env = env.env
+    return None
+
+
+def get_env_state(env: gym.Env) -> dict:
+    """What a bit-exact continuation of this episode needs: the MuJoCo integration state
+    (qpos, qvel, act, time, warm start), the time-limit counter and the env's RNG."""
+    state = {"np_random": env.unwrapped.np_random.bit_generator.state}
+    limit = _find_wrapper(env, gym.wrappers.TimeLimit)
+    if limit is not None:
+        state["elapsed_steps"] = limit._elapsed_steps
+    model, data = getattr(env.unwrapped, "model", None), getattr(env.unwrapped, "data", None)
+    if model is not None and data is not None:
+        import mujoco
+
+        spec = mujoco.mjtState.mjSTATE_INTEGRATION
+        physics = np.empty(mujoco.mj_stateSize(model, spec))
+        mujoco.mj_getState(model, data, physics, spec)
+        state["mujoco"] = physics
+    return state
+
+
+def set_env_state(env: gym.Env, state: dict) -> None:
+    env.unwrapped.np_random.bit_generator.state = state["np_random"]
+    limit = _find_wrapper(env, gym.wrappers.TimeLimit)
+    if limit is not None and "elapsed_steps" in state:
+        limit._elapsed_steps = state["elapsed_steps"]
+    if "mujoco" in state:
+        import mujoco
+
+        model, data = env.unwrapped.model, env.unwrapped.data
+        spec = mujoco.mjtState.mjSTATE_INTEGRATION
+        if state["mujoco"].shape[0] != mujoco.mj_stateSize(model, spec):
+            raise ConfigError("the checkpoint's simulator state does not fit this env's model")
+        mujoco.mj_setState(model, data, state["mujoco"], spec)
+        mujoco.mj_forward(model, data)

@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import math
 import random
+import signal
 import sys
+import threading
 import time
 from collections import deque
 from pathlib import Path
@@ -24,9 +26,9 @@ from ppo_torchrl.advantage import explained_variance, make_advantage
 from ppo_torchrl.checkpoint import CheckpointManager
 from ppo_torchrl.collector import make_collector
 from ppo_torchrl.envs import env_spec, seed_everything
-from ppo_torchrl.errors import ConfigError
+from ppo_torchrl.errors import ConfigError, Interrupted, TrainingError
 from ppo_torchrl.evaluate import evaluate_policy
-from ppo_torchrl.loggers import MetricsFile, make_logger
+from ppo_torchrl.loggers import MetricsFile, make_logger, truncate_logs
 from ppo_torchrl.losses import make_loss
 from ppo_torchrl.models import make_actor_critic
 
@@ -122,8 +124,34 @@ def _check_keys_against_schema(cfg) -> None:
         raise ConfigError(f"unknown or invalid config key '{key}': {str(exc).splitlines()[0]}") from exc
 
 
+class StopRequest:
+    """SIGINT/SIGTERM handlers: the first signal asks the loop to stop after the current iteration
+    (then it checkpoints); a second one abandons it at once, leaving the last checkpoint on disk."""
+
+    def __init__(self):
+        self.signum: Optional[int] = None
+        self._previous = {}
+
+    def __enter__(self) -> "StopRequest":
+        if threading.current_thread() is threading.main_thread():
+            for signum in (signal.SIGINT, signal.SIGTERM):
+                self._previous[signum] = signal.signal(signum, self._handle)
+        return self
+
+    def _handle(self, signum, frame) -> None:
+        if self.signum is not None:
+            raise KeyboardInterrupt
+        self.signum = signum
+        print(f"{signal.Signals(signum).name}: stopping after this iteration to save a checkpoint "
+              "(send it again to stop at once)", file=sys.stderr, flush=True)
+
+    def __exit__(self, *exc) -> None:
+        for signum, handler in self._previous.items():
+            signal.signal(signum, handler)
+
+
 class Trainer:
-    def __init__(self, cfg, run_dir: Path):
+    def __init__(self, cfg, run_dir: Path, resume: Optional[dict] = None):
         validate_config(cfg)
         self.cfg = cfg
         self.run_dir = Path(run_dir)
@@ -155,40 +183,77 @@ class Trainer:
         self.train_time = 0.0  # seconds spent collecting and updating (what SPS divides by)
         self.start_time = time.perf_counter()
         self._last_print = 0.0
+        self.resumed = resume is not None
+        if resume is not None:
+            self._restore(resume)
+
+    def _restore(self, state: dict) -> None:
+        """Continue from a checkpoint: weights, optimizer, stats, envs, counters and RNG streams."""
+        check_spec(state, self.spec, self.cfg.env.id)
+        self.ac.actor.load_state_dict(state["actor"])
+        self.ac.critic.load_state_dict(state["critic"])
+        self.loss_module.load_state_dict(state.get("loss_module", {}), strict=False)
+        self.optimizer.load_state_dict(state["optimizer"])
+        self.collector.load_state_dict(state["normalization"])
+        self.frames, self.iteration = state["frames"], state["iteration"]
+        self.recent_returns.extend(state.get("recent_returns", []))
+        self.last_eval = state.get("last_eval")
+        self.ckpt.best_return = state.get("best_eval_return")
+        self.train_time = state.get("train_time", 0.0)
+        rng = state["rng"]
+        torch.set_rng_state(rng["torch"])
+        np.random.set_state(rng["numpy"])
+        random.setstate(rng["python"])
 
     # ---------------------------------------------------------------- the loop
     def train(self) -> dict:
         cfg = self.cfg
-        self.metrics = MetricsFile(self.run_dir / "metrics.csv", COLUMNS)
+        if self.resumed:
+            truncate_logs(self.run_dir, self.frames)
+        self.metrics = MetricsFile(self.run_dir / "metrics.csv", COLUMNS, append=self.resumed)
         (self.run_dir / "config.yaml").write_text(OmegaConf.to_yaml(cfg, resolve=True))
         batch_frames = cfg.collector.frames_per_batch
+        stop = StopRequest()
         try:
-            while self.iteration < self.num_iterations:
-                tick = time.perf_counter()
-                lr = self._set_lr()
-                batch = self.collector.collect()
-                update_stats = self.update(batch)
-                self.frames += batch_frames
-                self.iteration += 1
-                self.train_time += time.perf_counter() - tick
-
-                last = self.iteration == self.num_iterations
-                row = {"iteration": self.iteration, "frames": self.frames, "lr": lr, **update_stats}
-                row.update(self._episode_stats())
-                if last and cfg.eval.final_episodes > 0:
-                    row.update(self._evaluate(cfg.eval.final_episodes))
-                elif not last and self._crossed(cfg.eval.every_frames):
-                    row.update(self._evaluate(cfg.eval.episodes))
-                row["time_s"] = time.perf_counter() - self.start_time
-                row["sps"] = self.frames / self.train_time
-                self._log(row, last)
-                if last or self._crossed(cfg.checkpoint.every_frames):
-                    self.save_checkpoint(eval_return=row.get("eval/return_mean"))
-                self.write_summary(status="finished" if last else "running")
+            with stop:
+                self._loop(stop, batch_frames)
+        except KeyboardInterrupt:  # a second signal: the iteration in flight is abandoned
+            self.write_summary(status="interrupted")
+            raise Interrupted(f"stopped at once; the last checkpoint on disk is kept: {self.ckpt.dir / 'last.pt'} "
+                              f"(resume with: python -m ppo_torchrl resume={self.run_dir})", signal.SIGINT)
         finally:
             self.metrics.close()
             self.collector.close()
         return self.summary(status="finished")
+
+    def _loop(self, stop: StopRequest, batch_frames: int) -> None:
+        cfg = self.cfg
+        while self.iteration < self.num_iterations:
+            tick = time.perf_counter()
+            lr = self._set_lr()
+            batch = self.collector.collect()
+            update_stats = self.update(batch)
+            self.frames += batch_frames
+            self.iteration += 1
+            self.train_time += time.perf_counter() - tick
+
+            last = self.iteration == self.num_iterations
+            row = {"iteration": self.iteration, "frames": self.frames, "lr": lr, **update_stats}
+            row.update(self._episode_stats())
+            if last and cfg.eval.final_episodes > 0:
+                row.update(self._evaluate(cfg.eval.final_episodes))
+            elif not last and self._crossed(cfg.eval.every_frames):
+                row.update(self._evaluate(cfg.eval.episodes))
+            row["time_s"] = time.perf_counter() - self.start_time
+            row["sps"] = self.frames / self.train_time
+            self._log(row, last)
+            if last or stop.signum is not None or self._crossed(cfg.checkpoint.every_frames):
+                path = self.save_checkpoint(eval_return=row.get("eval/return_mean"))
+            if stop.signum is not None and not last:
+                self.write_summary(status="interrupted")
+                raise Interrupted(f"checkpoint at frame {self.frames} saved to {path} "
+                                  f"(resume with: python -m ppo_torchrl resume={self.run_dir})", stop.signum)
+            self.write_summary(status="finished" if last else "running")
 
     def _set_lr(self) -> float:
         cfg = self.cfg.optim
@@ -219,7 +284,7 @@ class Trainer:
         mb_size = cfg.loss.minibatch_size or n
         max_norm = cfg.optim.max_grad_norm
         outputs, grad_norms = [], []
-        for _ in range(cfg.loss.epochs):
+        for epoch in range(cfg.loss.epochs):
             perm = torch.randperm(n, device=self.device)
             for start in range(0, n, mb_size):
                 minibatch = flat[perm[start:start + mb_size]]
@@ -230,10 +295,15 @@ class Trainer:
                 loss = sum(v for k, v in out.items() if k.startswith("loss_"))
                 self.optimizer.zero_grad(set_to_none=True)
                 loss.backward()
-                if max_norm is not None:
-                    grad_norms.append(torch.nn.utils.clip_grad_norm_(self.params, max_norm))
+                # with max_norm=None this only measures the norm (clipping at infinity)
+                grad_norm = torch.nn.utils.clip_grad_norm_(self.params, max_norm or math.inf)
+                if not torch.isfinite(loss.detach() + grad_norm):  # checked before any bad step is taken
+                    self._non_finite("loss" if not torch.isfinite(loss) else "gradient", epoch, start // mb_size)
                 self.optimizer.step()
+                grad_norms.append(grad_norm)
                 outputs.append(out.detach().set("loss_total", loss.detach()))
+        if not all(torch.isfinite(p).all() for p in self.params):
+            self._non_finite("parameter", cfg.loss.epochs - 1, None)
         stacked = torch.stack(outputs)
         for key in stacked.keys():
             name = LOSS_METRICS.get(key, "loss/total" if key == "loss_total" else None)
@@ -242,6 +312,14 @@ class Trainer:
         if grad_norms:
             stats["train/grad_norm"] = torch.stack(grad_norms).mean().item()
         return stats
+
+    def _non_finite(self, quantity: str, epoch: int, minibatch: Optional[int]) -> None:
+        where = f"epoch {epoch + 1}" + (f", minibatch {minibatch + 1}" if minibatch is not None else "")
+        last = self.ckpt.dir / "last.pt"
+        kept = f"the last good checkpoint is {last}" if last.exists() else "no checkpoint had been written yet"
+        self.write_summary(status="failed")
+        raise TrainingError(f"non-finite {quantity} at iteration {self.iteration + 1} (frames {self.frames}, {where}); "
+                            f"training stopped and {kept}")
 
     # ---------------------------------------------------------------- bookkeeping
     def _crossed(self, every: int) -> bool:
@@ -302,6 +380,9 @@ class Trainer:
             "rng": {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "python": random.getstate()},
             "config": OmegaConf.to_container(self.cfg, resolve=True),
             "last_eval": self.last_eval,
+            "best_eval_return": self.ckpt.best_return,
+            "recent_returns": list(self.recent_returns),
+            "train_time": self.train_time,
         }
 
     def save_checkpoint(self, eval_return: Optional[float] = None) -> Path:
@@ -332,8 +413,17 @@ class Trainer:
         checkpoint.atomic_write_json(self.run_dir / "summary.json", self.summary(status))
 
 
-def train(cfg, run_dir: Path) -> dict:
-    trainer = Trainer(cfg, run_dir)
+def check_spec(state: dict, spec, env_id: str) -> None:
+    saved = state.get("spec", {})
+    if (saved.get("obs_dim"), saved.get("action_dim")) != (spec.obs_dim, spec.action_dim):
+        raise ConfigError(
+            f"the checkpoint was made for observations of size {saved.get('obs_dim')} and actions of size "
+            f"{saved.get('action_dim')}, but {env_id} has {spec.obs_dim} and {spec.action_dim}"
+        )
+
+
+def train(cfg, run_dir: Path, resume: Optional[dict] = None) -> dict:
+    trainer = Trainer(cfg, run_dir, resume)
     summary = trainer.train()
     print(f"run dir: {run_dir}", file=sys.stderr)
     return summary
