@@ -31,6 +31,7 @@ def atomic_write_bytes(path: Path, write) -> None:
             write(f)
             f.flush()
             os.fsync(f.fileno())
+        os.chmod(tmp, 0o644)  # mkstemp makes files private; these are ordinary outputs
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
@@ -78,3 +79,37 @@ class CheckpointManager:
             self.best_return = eval_return
             save(self.dir / BEST, state)
         return self.dir / LAST
+
+
+def resolve_checkpoint(run_dir: Path, which: str) -> Path:
+    """`best`, `last` or a file path (absolute, or relative to the run's checkpoints dir)."""
+    run_dir = Path(run_dir)
+    if not (run_dir / "config.yaml").is_file():
+        raise ConfigError(f"run={run_dir} is not a ppo_torchrl run dir (no config.yaml)")
+    if which in ("best", "last"):
+        path = run_dir / "checkpoints" / f"{which}.pt"
+        if which == "best" and not path.exists():
+            path = run_dir / "checkpoints" / LAST  # no eval ran yet: the last is the best we have
+        return path
+    path = Path(which)
+    return path if path.is_absolute() or path.exists() else run_dir / "checkpoints" / which
+
+
+def load_policy(run_dir: Path, which: str = "best"):
+    """(config, actor-critic with the checkpoint's weights, checkpoint state) of a finished run."""
+    from omegaconf import OmegaConf
+
+    from ppo_torchrl.config import Config
+    from ppo_torchrl.envs import env_spec
+    from ppo_torchrl.models import make_actor_critic
+    from ppo_torchrl.trainer import check_spec
+
+    path = resolve_checkpoint(run_dir, which)
+    state = load(path)
+    cfg = OmegaConf.merge(OmegaConf.structured(Config), OmegaConf.load(Path(run_dir) / "config.yaml"))
+    spec = env_spec(cfg.env)
+    check_spec(state, spec, cfg.env.id)
+    ac = make_actor_critic(cfg.policy, spec)
+    ac.actor.load_state_dict(state["actor"])
+    ac.critic.load_state_dict(state["critic"])
+    return cfg, ac, state

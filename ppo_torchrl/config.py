@@ -129,6 +129,7 @@ class EvalConfig:
     episodes: int = 5
     final_episodes: int = 10  # at the end of training; 0 disables
     deterministic: bool = True
+    video: bool = False  # film the first episode of each eval into <run dir>/videos/ (MUJOCO_GL=egl)
 
 
 @dataclass

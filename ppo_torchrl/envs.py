@@ -109,6 +109,7 @@ def make_torchrl_env(
     render_mode: Optional[str] = None,
     device: str = "cpu",
     num_envs: int = 1,
+    **render_kwargs,
 ) -> TransformedEnv:
     """`TransformedEnv(GymEnv)` with the configured transforms.
 
@@ -123,8 +124,7 @@ def make_torchrl_env(
     if env_cfg.max_episode_steps is not None:
         kwargs["max_episode_steps"] = env_cfg.max_episode_steps
     if render_mode is not None:
-        kwargs["render_mode"] = render_mode
-        kwargs["from_pixels"] = False
+        kwargs.update(render_mode=render_mode, **render_kwargs)
     if num_envs == 1:
         base = GymEnv(env_cfg.id, device=device, disable_env_checker=True, **kwargs)
     else:  # one process, envs stepped in turn (the simulator is fast; processes would cost more)

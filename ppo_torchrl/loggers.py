@@ -8,22 +8,65 @@ from __future__ import annotations
 
 import csv
 import math
+import sys
+import time
 from pathlib import Path
-from typing import Dict, List
+from typing import Dict, List, Optional
 
 from ppo_torchrl.errors import ConfigError
 
-LOGGERS = ("csv", "none")
+LOGGERS = ("csv", "tensorboard", "wandb", "mlflow", "none")
+EXTRA = {"tensorboard": "tensorboard", "wandb": "wandb", "mlflow": "mlflow-skinny"}
 
 
-def make_logger(cfg, run_dir: Path):
+def make_logger(cfg, run_dir: Path, run_name: str):
+    """A torchrl.record.loggers logger writing under the run dir; none of them needs a network:
+    wandb runs offline (sync later with `wandb sync`), mlflow uses a local file store."""
     if cfg.name not in LOGGERS:
         raise ConfigError(f"logger='{cfg.name}' is not known; use one of {', '.join(LOGGERS)}")
     if cfg.name == "none":
         return None
-    from torchrl.record.loggers import CSVLogger
+    try:
+        if cfg.name == "csv":
+            from torchrl.record.loggers import CSVLogger
 
-    return CSVLogger(exp_name="csv", log_dir=str(run_dir / "logs"))
+            return CSVLogger(exp_name="csv", log_dir=str(run_dir / "logs"))
+        if cfg.name == "tensorboard":
+            from torchrl.record.loggers import TensorboardLogger
+
+            return TensorboardLogger(exp_name="tensorboard", log_dir=str(run_dir / "logs"))
+        if cfg.name == "wandb":
+            import os
+
+            from torchrl.record.loggers import WandbLogger
+
+            os.environ.setdefault("WANDB_SILENT", "true")
+            return WandbLogger(exp_name=run_name, offline=True, save_dir=str(run_dir / "logs"),
+                               project=cfg.project, log_env_packages=False)
+        import os
+
+        from torchrl.record.loggers import MLFlowLogger
+
+        # A local file store, as asked; recent mlflow wants this opt-in for the file backend.
+        os.environ.setdefault("MLFLOW_ALLOW_FILE_STORE", "true")
+        return MLFlowLogger(exp_name=cfg.project, tracking_uri=(run_dir / "logs" / "mlruns").resolve().as_uri(),
+                            tags={"run": run_name})
+    except ImportError as exc:
+        raise ConfigError(f"logger={cfg.name} needs the '{EXTRA[cfg.name]}' package: "
+                          f"pip install -e '.[loggers]' ({exc})") from exc
+
+
+def close_logger(logger) -> None:
+    """Flush and finish the logger's run (wandb and mlflow keep one open)."""
+    experiment = getattr(logger, "experiment", None)
+    for name in ("finish", "close"):  # wandb run, tensorboard SummaryWriter
+        if hasattr(experiment, name):
+            getattr(experiment, name)()
+            return
+    if type(logger).__name__ == "MLFlowLogger":
+        import mlflow
+
+        mlflow.end_run()
 
 
 class MetricsFile:
@@ -65,3 +108,48 @@ def truncate_logs(run_dir: Path, frames: int) -> None:
     for scalars in (Path(run_dir) / "logs").glob("*/scalars/**/*.csv"):
         lines = scalars.read_text().splitlines(keepends=True)
         scalars.write_text("".join(l for l in lines if int(l.split(",")[0]) <= frames))
+
+
+class Progress:
+    """A tqdm bar (frames, SPS, recent return, ETA) on a terminal; plain periodic lines otherwise,
+    which read well in CI logs and batch-job output files."""
+
+    def __init__(self, total_frames: int, start_frames: int, every_s: float, tty: Optional[bool] = None):
+        self.total = total_frames
+        self.every_s = every_s
+        self.tty = sys.stdout.isatty() if tty is None else tty
+        self._last = -math.inf  # the first update always prints
+        self.bar = None
+        if self.tty:
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=total_frames, initial=start_frames, unit="frame", unit_scale=True,
+                            dynamic_ncols=True, smoothing=0.1)
+
+    def update(self, row: dict, frames_done: int, force: bool) -> None:
+        stats = {"sps": f"{row['sps']:.0f}"}
+        if row.get("train/return_last100") is not None:
+            stats["return"] = f"{row['train/return_last100']:.1f}"
+        if row.get("eval/return_mean") is not None:
+            stats["eval"] = f"{row['eval/return_mean']:.1f}"
+        if self.bar is not None:
+            self.bar.update(frames_done)
+            self.bar.set_postfix(stats, refresh=False)
+            if "eval" in stats:
+                self.bar.write(f"eval at {row['frames']} frames: {row['eval/return_mean']:.1f} +- {row['eval/return_std']:.1f}")
+            return
+        now = time.perf_counter()
+        if force or "eval" in stats or now - self._last >= self.every_s:
+            self._last = now
+            eta = (self.total - row["frames"]) / max(row["sps"], 1e-9)
+            parts = [f"frames {row['frames']:>9d}/{self.total}", f"sps {row['sps']:6.0f}"]
+            if "return" in stats:
+                parts.append(f"return(last100) {row['train/return_last100']:8.1f}")
+            if "eval" in stats:
+                parts.append(f"eval {row['eval/return_mean']:8.1f} +- {row['eval/return_std']:.1f}")
+            parts.append(f"eta {eta / 60:5.1f} min")
+            print(" | ".join(parts), flush=True)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()

@@ -28,7 +28,7 @@ from ppo_torchrl.collector import make_collector
 from ppo_torchrl.envs import env_spec, seed_everything
 from ppo_torchrl.errors import ConfigError, Interrupted, TrainingError
 from ppo_torchrl.evaluate import evaluate_policy
-from ppo_torchrl.loggers import MetricsFile, make_logger, truncate_logs
+from ppo_torchrl.loggers import MetricsFile, Progress, close_logger, make_logger, truncate_logs
 from ppo_torchrl.losses import make_loss
 from ppo_torchrl.models import make_actor_critic
 
@@ -171,7 +171,7 @@ class Trainer:
         )
         self.loss_fn = torch.compile(self.loss_module) if cfg.compile else self.loss_module
         self.collector = make_collector(cfg, self.ac, cfg.seed, self.device)
-        self.logger = make_logger(cfg.logger, self.run_dir)
+        self.logger = make_logger(cfg.logger, self.run_dir, run_name=f"{cfg.env.id}_seed{cfg.seed}_{self.run_dir.name}")
         self.ckpt = CheckpointManager(self.run_dir / "checkpoints", cfg.checkpoint.keep_last, cfg.checkpoint.save_best)
 
         self.frames = 0
@@ -182,7 +182,6 @@ class Trainer:
         self.last_eval: Optional[dict] = None
         self.train_time = 0.0  # seconds spent collecting and updating (what SPS divides by)
         self.start_time = time.perf_counter()
-        self._last_print = 0.0
         self.resumed = resume is not None
         if resume is not None:
             self._restore(resume)
@@ -214,6 +213,7 @@ class Trainer:
         (self.run_dir / "config.yaml").write_text(OmegaConf.to_yaml(cfg, resolve=True))
         batch_frames = cfg.collector.frames_per_batch
         stop = StopRequest()
+        self.progress = Progress(self.num_iterations * batch_frames, self.frames, cfg.logger.print_every_s)
         try:
             with stop:
                 self._loop(stop, batch_frames)
@@ -222,8 +222,11 @@ class Trainer:
             raise Interrupted(f"stopped at once; the last checkpoint on disk is kept: {self.ckpt.dir / 'last.pt'} "
                               f"(resume with: python -m ppo_torchrl resume={self.run_dir})", signal.SIGINT)
         finally:
+            self.progress.close()
             self.metrics.close()
             self.collector.close()
+            if self.logger is not None:
+                close_logger(self.logger)
         return self.summary(status="finished")
 
     def _loop(self, stop: StopRequest, batch_frames: int) -> None:
@@ -342,8 +345,10 @@ class Trainer:
         return stats
 
     def _evaluate(self, episodes: int) -> dict:
+        video = self.run_dir / "videos" / f"eval_{self.frames:010d}.mp4" if self.cfg.eval.video else None
         result = evaluate_policy(self.cfg, self.ac, self.collector.obs_stats(), episodes,
-                                 seed=self.cfg.seed + 10_000, deterministic=self.cfg.eval.deterministic)
+                                 seed=self.cfg.seed + 10_000, deterministic=self.cfg.eval.deterministic,
+                                 video_path=video)
         self.last_eval = {"frames": self.frames, **result}
         return {"eval/return_mean": result["return_mean"], "eval/return_std": result["return_std"],
                 "eval/length_mean": result["length_mean"]}
@@ -354,16 +359,7 @@ class Trainer:
             for key, value in row.items():
                 if key not in ("iteration", "frames") and value is not None and not (isinstance(value, float) and math.isnan(value)):
                     self.logger.log_scalar(key, value, step=self.frames)
-        now = time.perf_counter()
-        if last or "eval/return_mean" in row or now - self._last_print >= self.cfg.logger.print_every_s:
-            self._last_print = now
-            parts = [f"frames {self.frames:>9d}/{self.num_iterations * self.cfg.collector.frames_per_batch}",
-                     f"sps {row['sps']:6.0f}"]
-            if "train/return_last100" in row:
-                parts.append(f"return(last100) {row['train/return_last100']:8.1f}")
-            if "eval/return_mean" in row:
-                parts.append(f"eval {row['eval/return_mean']:8.1f} +- {row['eval/return_std']:.1f}")
-            print(" | ".join(parts), flush=True)
+        self.progress.update(row, self.cfg.collector.frames_per_batch, force=last)
 
     def state_dict(self) -> dict:
         return {

@@ -1,0 +1,34 @@
+"""`key=value` arguments for the small entry points (evaluate, export), checked like Hydra's."""
+
+from __future__ import annotations
+
+from typing import Any, Dict
+
+from ppo_torchrl.errors import ConfigError
+
+TRUE, FALSE = {"true", "1", "yes"}, {"false", "0", "no"}
+
+
+def parse_args(argv: list[str], spec: Dict[str, Any], usage: str) -> Dict[str, Any]:
+    """spec: name -> default (its type is the default's; None means a required string)."""
+    values = dict(spec)
+    for arg in argv:
+        key, sep, raw = arg.partition("=")
+        if not sep or key not in spec:
+            raise ConfigError(f"unexpected argument '{arg}'; usage: {usage}")
+        default = spec[key]
+        try:
+            if isinstance(default, bool):
+                if raw.lower() not in TRUE | FALSE:
+                    raise ValueError
+                values[key] = raw.lower() in TRUE
+            elif isinstance(default, int):
+                values[key] = int(raw)
+            else:
+                values[key] = raw
+        except ValueError:
+            raise ConfigError(f"{key}={raw}: expected a {type(default).__name__}; usage: {usage}") from None
+    missing = [k for k, v in values.items() if v is None]
+    if missing:
+        raise ConfigError(f"missing {', '.join(k + '=...' for k in missing)}; usage: {usage}")
+    return values

@@ -1,0 +1,82 @@
+"""Export a trained policy as TorchScript: raw observation in, deterministic action out.
+
+    python -m ppo_torchrl.export run=<run dir> [checkpoint=best|last|<file>]
+
+writes <run dir>/policy.pt. The module bakes in the frozen observation normalization and clipping
+and the squashing (TanhNormal) or clipping (Normal) to the action bounds, so it runs anywhere
+torch runs: `torch.jit.load("policy.pt")(torch.as_tensor(obs, dtype=torch.float32))`, with any
+batch shape, no torchrl or ppo_torchrl needed.
+"""
+
+from __future__ import annotations
+
+import copy
+import sys
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+import torch
+from torch import nn
+
+from ppo_torchrl.errors import ConfigError
+from ppo_torchrl.models import ActorCritic
+
+
+class DeployedPolicy(nn.Module):
+    """obs -> normalize -> clip -> policy net mean -> squash/clip into the action bounds."""
+
+    def __init__(self, ac: ActorCritic, obs_stats: Optional[dict], obs_clip: Optional[float], epsilon: float):
+        super().__init__()
+        # a frozen copy: the deployed module needs no torch.no_grad() and leaves training weights alone
+        self.policy_net = copy.deepcopy(ac.policy_net).cpu().requires_grad_(False)
+        obs_dim = ac.policy_net[0][0].in_features
+        mean = np.zeros(obs_dim) if obs_stats is None else np.asarray(obs_stats["mean"])
+        std = np.ones(obs_dim) if obs_stats is None else np.sqrt(np.asarray(obs_stats["var"]) + epsilon)
+        self.register_buffer("obs_mean", torch.as_tensor(mean, dtype=torch.float32))
+        self.register_buffer("obs_std", torch.as_tensor(std, dtype=torch.float32))
+        clip = float(obs_clip) if obs_stats is not None and obs_clip is not None else float("inf")
+        self.register_buffer("obs_clip", torch.tensor(clip))
+        self.register_buffer("low", ac.action_low.float().cpu())
+        self.register_buffer("high", ac.action_high.float().cpu())
+        self.squash = ac.head == "tanh_normal"
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        x = ((obs - self.obs_mean) / self.obs_std).clamp(-self.obs_clip, self.obs_clip)
+        loc = self.policy_net(x)[0]
+        if self.squash:
+            return (self.high + self.low) / 2 + (self.high - self.low) / 2 * torch.tanh(loc)
+        return torch.maximum(torch.minimum(loc, self.high), self.low)
+
+
+def export_policy(cfg, ac: ActorCritic, obs_stats: Optional[dict], path: Path) -> Path:
+    t = cfg.env.transforms
+    module = DeployedPolicy(ac, obs_stats, t.obs_clip, t.norm_epsilon).eval()
+    example = torch.zeros(2, module.obs_mean.shape[0])
+    with torch.no_grad():
+        scripted = torch.jit.trace(module, example)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    scripted.save(str(path))
+    return path
+
+
+def main(argv: list[str]) -> Path:
+    from ppo_torchrl.checkpoint import load_policy
+    from ppo_torchrl.cli import parse_args
+
+    usage = "python -m ppo_torchrl.export run=<run dir> [checkpoint=best|last|<file>]"
+    args = parse_args(argv, {"run": None, "checkpoint": "best"}, usage)
+    run_dir = Path(args["run"])
+    cfg, ac, state = load_policy(run_dir, args["checkpoint"])
+    path = export_policy(cfg, ac, state["normalization"]["obs"], run_dir / "policy.pt")
+    print(f"exported {cfg.env.id} policy ({args['checkpoint']}, {state['frames']} frames) to {path}")
+    return path
+
+
+if __name__ == "__main__":
+    from ppo_torchrl.errors import report_and_exit
+
+    try:
+        main(sys.argv[1:])
+    except ConfigError as error:
+        report_and_exit(error)

@@ -1,0 +1,128 @@
+"""Evaluate, video, export, loggers, progress and report on real short runs."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import torch
+from tensordict import TensorDict
+from torchrl.envs.utils import ExplorationType, set_exploration_type
+
+from ppo_torchrl import evaluate, export, report
+from ppo_torchrl.checkpoint import load_policy
+from ppo_torchrl.loggers import Progress
+from ppo_torchrl.trainer import Trainer
+
+from conftest import ROOT, run_cli
+
+
+@pytest.fixture(scope="module")
+def trained_run(tmp_path_factory):
+    """One short InvertedPendulum run shared by the tests of this module (TanhNormal head)."""
+    from conftest import TINY, compose_config
+
+    run_dir = tmp_path_factory.mktemp("run")
+    cfg = compose_config(["env=InvertedPendulum-v4", *TINY, "policy=tanh_normal", "eval.every_frames=256",
+                          "eval.episodes=1", "eval.video=true"])
+    Trainer(cfg, run_dir).train()
+    return run_dir
+
+
+def test_video_during_training(trained_run):
+    videos = sorted((trained_run / "videos").glob("eval_*.mp4"))
+    assert [v.name for v in videos] == ["eval_0000000256.mp4", "eval_0000000512.mp4"]
+    assert all(v.stat().st_size > 1000 for v in videos)
+
+
+def test_evaluate_cli_writes_json_and_video(trained_run):
+    result = run_cli(f"run={trained_run}", "episodes=2", "video=true", module="ppo_torchrl.evaluate")
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert "return" in result.stdout and "+-" in result.stdout
+    data = json.loads((trained_run / "eval" / "eval.json").read_text())
+    assert len(data["returns"]) == 2 and data["episodes"] == 2 and data["checkpoint"] == "best"
+    video = trained_run / "eval" / "best.mp4"
+    assert video.stat().st_size > 1000
+    assert video.read_bytes()[4:8] == b"ftyp"  # an mp4 container
+
+
+def test_evaluate_bad_input_is_one_line(trained_run):
+    for args, expected in [(["run=/nonexistent"], "not a ppo_torchrl run dir"),
+                           ([f"run={trained_run}", "episodes=many"], "expected a int"),
+                           ([f"run={trained_run}", "checkpoint=nope.pt"], "does not exist")]:
+        result = run_cli(*args, module="ppo_torchrl.evaluate")
+        assert result.returncode == 2 and "Traceback" not in result.stderr
+        assert expected in result.stderr.strip().splitlines()[-1]
+
+
+def test_exported_policy_matches_the_actor_and_runs_without_torchrl(trained_run, tmp_path):
+    path = export.main([f"run={trained_run}", "checkpoint=last"])
+    cfg, ac, state = load_policy(trained_run, "last")
+    policy = torch.jit.load(str(path))
+    raw = torch.randn(5, 4) * 2
+    stats = state["normalization"]["obs"]
+    norm = ((raw.double() - torch.as_tensor(stats["mean"])) / torch.sqrt(torch.as_tensor(stats["var"]) + 1e-8))
+    td = TensorDict({"observation": norm.float().clamp(-10, 10)}, [5])
+    with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
+        expected = ac.actor(td)["action"]
+    torch.testing.assert_close(policy(raw), expected, atol=1e-5, rtol=1e-5)
+    assert policy(raw[0]).shape == (1,) and policy(raw.view(5, 1, 4)).shape == (5, 1, 1)  # any batch shape
+
+    script = tmp_path / "deploy.py"
+    script.write_text(
+        "import sys\n"
+        "for name in ('torchrl', 'tensordict', 'ppo_torchrl'):\n"
+        "    sys.modules[name] = None  # importing any of them now fails\n"
+        "import gymnasium as gym, torch\n"
+        f"policy = torch.jit.load({str(path)!r})\n"
+        "env = gym.make('InvertedPendulum-v4')\n"
+        "obs, _ = env.reset(seed=0)\n"
+        "total, done = 0.0, False\n"
+        "while not done:\n"
+        "    action = policy(torch.as_tensor(obs, dtype=torch.float32)).numpy()\n"
+        "    assert env.action_space.contains(action), action\n"
+        "    obs, r, term, trunc, _ = env.step(action)\n"
+        "    total, done = total + r, term or trunc\n"
+        "print('episode return', total)\n"
+    )
+    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, cwd=tmp_path, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "episode return" in out.stdout
+
+
+@pytest.mark.parametrize("logger, pattern", [
+    ("csv", "logs/csv/scalars/lr.csv"),
+    ("tensorboard", "logs/tensorboard/events.out.tfevents.*"),
+    ("wandb", "logs/wandb/offline-run-*/run-*.wandb"),
+    ("mlflow", "logs/mlruns/*/*/metrics/lr"),
+])
+def test_each_logger_writes_its_files(tiny_cfg, tmp_path, monkeypatch, logger, pattern):
+    monkeypatch.setenv("WANDB_MODE", "offline")
+    Trainer(tiny_cfg(f"logger={logger}"), tmp_path).train()
+    files = list(tmp_path.glob(pattern))
+    assert files and all(f.stat().st_size > 0 for f in files), pattern
+    if logger == "tensorboard":
+        from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+        events = EventAccumulator(str(files[0].parent))
+        events.Reload()
+        assert [e.step for e in events.Scalars("lr")] == [256, 512]
+    if logger == "mlflow":
+        steps = [line.split()[2] for line in files[0].read_text().splitlines()]
+        assert steps == ["256", "512"]
+
+
+def test_progress_plain_lines_off_a_terminal(capsys):
+    progress = Progress(total_frames=1000, start_frames=0, every_s=3600, tty=False)
+    row = {"frames": 500, "sps": 250.0, "train/return_last100": 12.5}
+    progress.update(row, 500, force=False)  # first call prints
+    progress.update({**row, "frames": 750}, 250, force=False)  # within every_s: silent
+    progress.update({**row, "frames": 1000}, 250, force=True)
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert len(lines) == 2 and "frames       500/1000" in lines[0] and "eta" in lines[0]
+
+
+def test_report_png(trained_run):
+    out = report.main([str(trained_run)])
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and out.stat().st_size > 20_000
