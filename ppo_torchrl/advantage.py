@@ -9,15 +9,37 @@ from __future__ import annotations
 
 from tensordict import TensorDictBase
 from torchrl.objectives.value import GAE
+from torchrl.objectives.value.functional import reward2go
 
 from ppo_torchrl.errors import ConfigError
 
 
-def make_advantage(cfg, critic) -> GAE:
-    if cfg.name != "gae":
-        raise ConfigError(f"advantage.name='{cfg.name}' is not known; use gae")
+class MonteCarloReturn:
+    """advantage = value_target = discounted reward-to-go within each episode, no baseline and no
+    bootstrap (REINFORCE as in Gymnasium's tutorial). An episode cut by the batch end counts only
+    the rewards inside the batch, so batches should hold whole episodes."""
+
+    def __init__(self, gamma: float, critic):
+        self.gamma = gamma
+        self.critic = critic  # still evaluated: explained variance and the critic's own loss
+
+    def __call__(self, batch: TensorDictBase) -> TensorDictBase:
+        reward = batch.get(("next", "reward"))
+        done = batch.get(("next", "done"))
+        returns = reward2go(reward, done, self.gamma, time_dim=-2)
+        batch.set("advantage", returns)
+        batch.set("value_target", returns)
+        self.critic(batch)
+        return batch
+
+
+def make_advantage(cfg, critic):
+    if cfg.name not in ("gae", "mc"):
+        raise ConfigError(f"advantage.name='{cfg.name}' is not known; use gae or mc")
     if not 0.0 <= cfg.gamma <= 1.0 or not 0.0 <= cfg.lmbda <= 1.0:
         raise ConfigError(f"advantage.gamma={cfg.gamma} and advantage.lmbda={cfg.lmbda} must lie in [0, 1]")
+    if cfg.name == "mc":
+        return MonteCarloReturn(cfg.gamma, critic)
     return GAE(gamma=cfg.gamma, lmbda=cfg.lmbda, value_network=critic, average_gae=False)
 
 

@@ -54,6 +54,7 @@ class PolicyConfig:
     std_min: float = 0.0  # floor added under the std; 0 disables it
     hidden_sizes: List[int] = field(default_factory=lambda: [64, 64])
     critic_hidden_sizes: List[int] = field(default_factory=lambda: [64, 64])
+    width: Optional[int] = None  # when set, every hidden layer (actor and critic) has this width
     activation: str = "tanh"  # tanh | relu | elu
     shared_trunk: bool = False  # one trunk (hidden_sizes) with a policy head and a value head
     ortho_init: bool = True  # orthogonal init, gain sqrt(2) hidden, policy_head_gain, value_head_gain

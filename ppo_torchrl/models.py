@@ -89,6 +89,8 @@ def validate_policy_config(cfg) -> None:
         raise ConfigError(f"policy.activation='{cfg.activation}' is not allowed; use one of {', '.join(ACTIVATIONS)}")
     if not cfg.hidden_sizes or any(int(s) <= 0 for s in cfg.hidden_sizes):
         raise ConfigError(f"policy.hidden_sizes={list(cfg.hidden_sizes)} must be a non-empty list of positive widths")
+    if cfg.width is not None and cfg.width <= 0:
+        raise ConfigError(f"policy.width={cfg.width} must be a positive width (or null)")
     if cfg.std_min < 0:
         raise ConfigError(f"policy.std_min={cfg.std_min} must be >= 0")
 
@@ -96,6 +98,8 @@ def validate_policy_config(cfg) -> None:
 def make_actor_critic(cfg, spec: EnvSpec, device: torch.device | str = "cpu") -> ActorCritic:
     """Build the actor and critic from the `policy` config group."""
     validate_policy_config(cfg)
+    hidden = [cfg.width] * len(cfg.hidden_sizes) if cfg.width else list(cfg.hidden_sizes)
+    critic_hidden = [cfg.width] * len(cfg.critic_hidden_sizes) if cfg.width else list(cfg.critic_hidden_sizes)
     low = torch.as_tensor(spec.action_low)
     high = torch.as_tensor(spec.action_high)
     action_spec = Bounded(low=low, high=high, shape=(spec.action_dim,), dtype=torch.float32)
@@ -115,7 +119,7 @@ def make_actor_critic(cfg, spec: EnvSpec, device: torch.device | str = "cpu") ->
         )
 
     if cfg.shared_trunk:
-        trunk, width = mlp(spec.obs_dim, list(cfg.hidden_sizes), cfg.activation, cfg.ortho_init)
+        trunk, width = mlp(spec.obs_dim, hidden, cfg.activation, cfg.ortho_init)
         params = GaussianParams(width, spec.action_dim, cfg)
         value_head = _init_linear(nn.Linear(width, 1), cfg.value_head_gain, cfg.ortho_init)
         avo = ActorValueOperator(
@@ -126,10 +130,10 @@ def make_actor_critic(cfg, spec: EnvSpec, device: torch.device | str = "cpu") ->
         actor, critic = avo.get_policy_operator(), avo.get_value_operator()
         policy_net = nn.Sequential(trunk, params)
     else:
-        body, width = mlp(spec.obs_dim, list(cfg.hidden_sizes), cfg.activation, cfg.ortho_init)
+        body, width = mlp(spec.obs_dim, hidden, cfg.activation, cfg.ortho_init)
         policy_net = nn.Sequential(body, GaussianParams(width, spec.action_dim, cfg))
         actor = probabilistic_actor(TensorDictModule(policy_net, in_keys=["observation"], out_keys=["loc", "scale"]))
-        cbody, cwidth = mlp(spec.obs_dim, list(cfg.critic_hidden_sizes), cfg.activation, cfg.ortho_init)
+        cbody, cwidth = mlp(spec.obs_dim, critic_hidden, cfg.activation, cfg.ortho_init)
         value_head = _init_linear(nn.Linear(cwidth, 1), cfg.value_head_gain, cfg.ortho_init)
         critic = ValueOperator(nn.Sequential(cbody, value_head), in_keys=["observation"])
     actor.to(device)

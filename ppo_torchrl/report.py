@@ -1,8 +1,15 @@
-"""Plot a run: `python -m ppo_torchrl.report <run dir>` writes <run dir>/report.png.
+"""Plot a run or a sweep: `python -m ppo_torchrl.report <run dir | sweep dir>`.
+
+A run dir gets <run dir>/report.png.
 
 Panels: raw training return (per-iteration mean and last-100 mean) and deterministic eval return
 against frames, then the PPO debugging quantities: entropy, approx KL, clip fraction, value loss,
 explained variance and policy std.
+
+A sweep (multirun) dir gets sweep_report.png (train return against frames, mean and 95% CI band
+over seeds, one curve per group of runs sharing their overrides minus `seed`) and
+sweep_report.md / .csv (final return mean +- std, seeds, frames, SPS). Failed or partial runs are
+left out with a line saying which.
 """
 
 from __future__ import annotations
@@ -76,12 +83,104 @@ def plot_run(run_dir: Path) -> Path:
     return out
 
 
-def main(argv: List[str]) -> Path:
+# two-sided 95% Student-t quantiles by degrees of freedom (n seeds - 1); 1.96 beyond the table
+T95 = {1: 12.71, 2: 4.30, 3: 3.18, 4: 2.78, 5: 2.57, 6: 2.45, 7: 2.36, 8: 2.31, 9: 2.26, 10: 2.23}
+
+
+def sweep_runs(sweep_dir: Path):
+    """(finished runs grouped by their overrides minus seed, lines about the runs left out)."""
+    import json
+
+    groups: Dict[str, list] = {}
+    skipped = []
+    for job in sorted(p for p in Path(sweep_dir).iterdir() if p.is_dir() and not p.name.startswith(".")):
+        summary, overrides = job / "summary.json", job / ".hydra" / "overrides.yaml"
+        if not summary.exists():
+            skipped.append(f"skipped {job.name}: no summary.json (failed before its first iteration)")
+            continue
+        s = json.loads(summary.read_text())
+        if s.get("status") != "finished":
+            skipped.append(f"skipped {job.name}: status {s.get('status')} at {s.get('frames')} frames")
+            continue
+        from omegaconf import OmegaConf
+
+        args = OmegaConf.load(overrides) if overrides.exists() else []
+        key = " ".join(sorted(a for a in args if not a.split("=")[0].lstrip("+~") == "seed")) or "(defaults)"
+        groups.setdefault(key, []).append((job, s))
+    return groups, skipped
+
+
+def plot_sweep(sweep_dir: Path) -> List[Path]:
+    """Learning curves (mean and 95% CI over seeds) and a table per group of a multirun dir."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    groups, skipped = sweep_runs(sweep_dir)
+    for line in skipped:
+        print(line)
+    if not groups:
+        raise ConfigError(f"{sweep_dir}: no finished runs to report")
+    fig, ax = plt.subplots(figsize=(10, 6), constrained_layout=True)
+    rows = []
+    for key, runs in sorted(groups.items()):
+        curves = [read_metrics(job / "metrics.csv") for job, _ in runs]
+        grid = np.asarray(max((c["frames"] for c in curves), key=len))
+        ys = np.stack([np.interp(grid, c["frames"], np.nan_to_num(np.asarray(c["train/return_last100"]), nan=0.0))
+                       for c in curves])
+        mean = ys.mean(0)
+        n = len(runs)
+        half = T95.get(n - 1, 1.96) * ys.std(0, ddof=1) / np.sqrt(n) if n > 1 else np.zeros_like(mean)
+        ax.plot(grid, mean, label=f"{key} (n={n})")
+        ax.fill_between(grid, mean - half, mean + half, alpha=0.2)
+        final = np.asarray([s["train_return_last100"] for _, s in runs], float)
+        evals = np.asarray([s["eval_return_mean"] if s["eval_return_mean"] is not None else np.nan for _, s in runs])
+        rows.append({
+            "group": key, "seeds": " ".join(str(s["seed"]) for _, s in sorted(runs, key=lambda r: r[1]["seed"])),
+            "n": n, "frames": int(np.min([s["frames"] for _, s in runs])),
+            "train_return_mean": final.mean(), "train_return_std": final.std(),
+            "eval_return_mean": np.nanmean(evals), "eval_return_std": np.nanstd(evals),
+            "sps": float(np.mean([s["sps"] for _, s in runs])),
+        })
+    ax.set(xlabel="frames", ylabel="train return (last 100 episodes, raw)", title=f"{Path(sweep_dir).name}: mean and 95% CI over seeds")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="best", fontsize=8)
+    png = Path(sweep_dir) / "sweep_report.png"
+    fig.savefig(png, dpi=90)
+    plt.close(fig)
+
+    csv_path = Path(sweep_dir) / "sweep_report.csv"
+    with open(csv_path, "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    md = ["| group | seeds | frames | train return (last 100) | eval return | SPS |", "|---|---|---|---|---|---|"]
+    md += [f"| {r['group']} | {r['seeds']} | {r['frames']:,} | {r['train_return_mean']:.1f} +- {r['train_return_std']:.1f} "
+           f"| {r['eval_return_mean']:.1f} +- {r['eval_return_std']:.1f} | {r['sps']:.0f} |" for r in rows]
+    md_path = Path(sweep_dir) / "sweep_report.md"
+    md_path.write_text("\n".join(md) + "\n" + "".join(f"\n{line}" for line in skipped) + ("\n" if skipped else ""))
+    print("\n".join(md))
+    return [png, md_path, csv_path]
+
+
+def main(argv: List[str]) -> List[Path]:
+    """A run dir gets report.png; a multirun (sweep) dir gets sweep_report.{png,md,csv}."""
     if len(argv) != 1:
-        raise ConfigError("usage: python -m ppo_torchrl.report <run dir>")
-    out = plot_run(Path(argv[0]))
-    print(f"wrote {out}")
-    return out
+        raise ConfigError("usage: python -m ppo_torchrl.report <run dir or sweep dir>")
+    target = Path(argv[0])
+    if not target.is_dir():
+        raise ConfigError(f"{target} is not a directory")
+    if (target / "metrics.csv").is_file():
+        outputs = [plot_run(target)]
+    elif (target / "multirun.yaml").is_file() or any(target.glob("*/.hydra")):
+        outputs = plot_sweep(target)
+    else:
+        raise ConfigError(f"{target} is neither a run dir (metrics.csv) nor a sweep dir (multirun.yaml)")
+    for out in outputs:
+        print(f"wrote {out}")
+    return outputs
 
 
 if __name__ == "__main__":

@@ -60,3 +60,14 @@ def test_explained_variance():
     assert explained_variance(td) == 1.0
     td["state_value"] = torch.zeros(3)
     assert explained_variance(td) < 0.01
+
+
+def test_monte_carlo_return_resets_at_episode_ends():
+    cfg = compose_config(["advantage=mc", "advantage.gamma=0.5"]).advantage
+    critic = ValueOperator(ObsIsValue(), in_keys=["observation"])
+    done = torch.tensor([False, True, False, False]).view(1, 4, 1)
+    td = TensorDict({"observation": torch.zeros(1, 4, 1),
+                     "next": {"reward": torch.ones(1, 4, 1), "done": done, "terminated": done}}, [1, 4])
+    make_advantage(cfg, critic)(td)
+    torch.testing.assert_close(td["advantage"].view(-1), torch.tensor([1.5, 1.0, 1.5, 1.0]))
+    assert "state_value" in td.keys()

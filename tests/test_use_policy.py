@@ -124,5 +124,5 @@ def test_progress_plain_lines_off_a_terminal(capsys):
 
 
 def test_report_png(trained_run):
-    out = report.main([str(trained_run)])
+    out = report.main([str(trained_run)])[0]
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and out.stat().st_size > 20_000

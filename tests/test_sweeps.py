@@ -1,0 +1,83 @@
+"""Multirun, Optuna, launcher configs, experiment presets and the sweep report."""
+
+import json
+import pickle
+
+import cloudpickle
+import pytest
+
+from ppo_torchrl import report
+from ppo_torchrl.trainer import Trainer, validate_config
+
+from conftest import TINY, compose_config, run_cli
+
+PRESETS = ["arena_hopper", "practical_rl_halfcheetah", "reinforce_pendulum", "aidl_halfcheetah"]
+
+
+def test_joblib_multirun_runs_every_seed_in_parallel_and_the_report_summarizes_them(tmp_path):
+    result = run_cli("-m", "env=InvertedPendulum-v4", "seed=1,2,3", "hydra/launcher=joblib",
+                     "hydra.launcher.n_jobs=2", *TINY, f"hydra.sweep.dir={tmp_path}")
+    assert result.returncode == 0, result.stderr[-2000:]
+    runs = sorted(tmp_path.glob("*/summary.json"))
+    assert [json.loads(p.read_text())["seed"] for p in runs] == [1, 2, 3]
+
+    # a partial run beside them is left out, with a line saying so
+    partial = tmp_path / "9_partial"
+    (partial / ".hydra").mkdir(parents=True)
+    (partial / "summary.json").write_text(json.dumps({"status": "interrupted", "frames": 256}))
+    png, md, csv = report.main([str(tmp_path)])
+    assert png.read_bytes()[:4] == b"\x89PNG"
+    table = md.read_text()
+    assert "| 1 2 3 | 512 |" in table and "skipped 9_partial: status interrupted" in table
+    assert csv.read_text().splitlines()[1].split(",")[1] == "1 2 3"
+
+
+def test_optuna_search_runs_trials_and_prints_the_best(tmp_path):
+    storage = f"sqlite:///{tmp_path / 'study.db'}"
+    result = run_cli("-m", "hparams_search=optuna", "env=InvertedPendulum-v4", "hydra.sweeper.n_trials=2", *TINY,
+                     f"hydra.sweeper.storage={storage}", f"hydra.sweep.dir={tmp_path / 'sweep'}")
+    assert result.returncode == 0, result.stderr[-2000:]
+    out = result.stdout + result.stderr
+    assert "Best parameters" in out and "Best value" in out
+    assert len(list((tmp_path / "sweep").glob("*/summary.json"))) == 2
+    import optuna
+
+    study = optuna.load_study(study_name="ppo_InvertedPendulum-v4", storage=storage)
+    assert len(study.trials) == 2  # stored: running the command again resumes this study
+
+
+@pytest.mark.parametrize("launcher", ["joblib", "submitit_slurm", "submitit_local", "ray"])
+def test_launcher_configs_compose(launcher):
+    if launcher == "ray":
+        pytest.importorskip("hydra_plugins.hydra_ray_launcher", reason="the [ray] extra is not installed")
+    cfg = compose_config([f"hydra/launcher={launcher}"], return_hydra_config=True)
+    assert "Launcher" in cfg.hydra.launcher._target_
+
+
+def test_the_job_function_pickles():
+    from ppo_torchrl.__main__ import main
+
+    clone = pickle.loads(cloudpickle.dumps(main))  # what submitit and ray ship to the workers
+    assert clone.__name__ == main.__name__
+
+
+@pytest.mark.parametrize("preset", PRESETS)
+def test_experiment_presets_compose_and_train(preset, tmp_path):
+    cfg = compose_config([f"experiment={preset}"])
+    validate_config(cfg)
+    short = compose_config([f"experiment={preset}", "collector.total_frames=1280", "collector.frames_per_batch=640",
+                            "loss.epochs=1", "eval.every_frames=0", "eval.final_episodes=1", "eval.video=false",
+                            "logger=none", "loss.minibatch_size=128" if preset != "reinforce_pendulum" else "seed=5"])
+    assert Trainer(short, tmp_path).train()["frames"] == 1280
+
+
+def test_presets_carry_their_documents_settings():
+    practical = compose_config(["experiment=practical_rl_halfcheetah"])
+    assert (practical.env.id, practical.loss.clip_value, practical.loss.critic_coef) == ("HalfCheetah-v4", 0.2, 0.25)
+    reinforce = compose_config(["experiment=reinforce_pendulum"])
+    assert (reinforce.loss.name, reinforce.advantage.name, reinforce.policy.std) == ("reinforce", "mc", "state_dependent")
+    assert list(reinforce.policy.hidden_sizes) == [16, 32] and reinforce.optim.lr == 1e-4
+    aidl = compose_config(["experiment=aidl_halfcheetah"])
+    assert aidl.policy.shared_trunk and list(aidl.policy.hidden_sizes) == [64, 128] and aidl.policy.std_min == 0.25
+    arena = compose_config(["experiment=arena_hopper"])
+    assert arena.env.id == "Hopper-v4" and arena.eval.video
