@@ -32,3 +32,15 @@ def parse_args(argv: list[str], spec: Dict[str, Any], usage: str) -> Dict[str, A
     if missing:
         raise ConfigError(f"missing {', '.join(k + '=...' for k in missing)}; usage: {usage}")
     return values
+
+
+def run(main) -> None:
+    """Run an entry point's main(argv); bad input becomes one line and exit 2."""
+    import sys
+
+    from ppo_torchrl.errors import report_and_exit
+
+    try:
+        main(sys.argv[1:])
+    except ConfigError as error:
+        report_and_exit(error)

@@ -13,7 +13,6 @@ of the first episode (headless: MUJOCO_GL=egl).
 from __future__ import annotations
 
 import copy
-import sys
 from pathlib import Path
 from typing import Optional
 
@@ -103,9 +102,6 @@ def main(argv: list[str]) -> dict:
 
 
 if __name__ == "__main__":
-    from ppo_torchrl.errors import report_and_exit
+    from ppo_torchrl.cli import run
 
-    try:
-        main(sys.argv[1:])
-    except ConfigError as error:
-        report_and_exit(error)
+    run(main)

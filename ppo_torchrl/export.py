@@ -11,7 +11,6 @@ batch shape, no torchrl or ppo_torchrl needed.
 from __future__ import annotations
 
 import copy
-import sys
 from pathlib import Path
 from typing import Optional
 
@@ -19,7 +18,6 @@ import numpy as np
 import torch
 from torch import nn
 
-from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.models import ActorCritic
 
 
@@ -74,9 +72,6 @@ def main(argv: list[str]) -> Path:
 
 
 if __name__ == "__main__":
-    from ppo_torchrl.errors import report_and_exit
+    from ppo_torchrl.cli import run
 
-    try:
-        main(sys.argv[1:])
-    except ConfigError as error:
-        report_and_exit(error)
+    run(main)

@@ -15,7 +15,6 @@ left out with a line saying which.
 from __future__ import annotations
 
 import csv
-import sys
 from pathlib import Path
 from typing import Dict, List
 
@@ -184,9 +183,6 @@ def main(argv: List[str]) -> List[Path]:
 
 
 if __name__ == "__main__":
-    from ppo_torchrl.errors import report_and_exit
+    from ppo_torchrl.cli import run
 
-    try:
-        main(sys.argv[1:])
-    except ConfigError as error:
-        report_and_exit(error)
+    run(main)

@@ -14,10 +14,9 @@ import torch
 from ppo_torchrl import checkpoint
 from ppo_torchrl.config import resume_config
 from ppo_torchrl.errors import ConfigError, Interrupted, TrainingError
-from ppo_torchrl.loggers import MetricsFile
 from ppo_torchrl.trainer import Trainer
 
-from conftest import ROOT, TINY, run_cli
+from conftest import ROOT, run_cli
 
 FOUR_ITERATIONS = ["collector.total_frames=1024", "eval.every_frames=512", "eval.episodes=1",
                    "checkpoint.every_frames=0", "logger=csv"]

@@ -4,18 +4,17 @@ import json
 import subprocess
 import sys
 
-import numpy as np
 import pytest
 import torch
 from tensordict import TensorDict
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
-from ppo_torchrl import evaluate, export, report
+from ppo_torchrl import export, report
 from ppo_torchrl.checkpoint import load_policy
 from ppo_torchrl.loggers import Progress
 from ppo_torchrl.trainer import Trainer
 
-from conftest import ROOT, run_cli
+from conftest import run_cli
 
 
 @pytest.fixture(scope="module")

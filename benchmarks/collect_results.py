@@ -1,0 +1,47 @@
+"""Copy the evidence of a sweep into results/: per run summary.json, metrics.csv and config.yaml,
+plus the sweep report (PNG, markdown, CSV) and a per-env table over seeds.
+
+    python benchmarks/collect_results.py outputs/multirun/quality_1m results/quality_1m
+"""
+
+import json
+import shutil
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from ppo_torchrl import report
+
+
+def main(sweep: Path, dest: Path) -> None:
+    report.main([str(sweep)])
+    dest.mkdir(parents=True, exist_ok=True)
+    rows = {}
+    for summary in sorted(sweep.glob("*/summary.json")):
+        s = json.loads(summary.read_text())
+        if s.get("status") != "finished":
+            print(f"left out {summary.parent.name}: status {s.get('status')}")
+            continue
+        run = dest / f"{s['env']}_seed{s['seed']}"
+        run.mkdir(exist_ok=True)
+        for name in ("summary.json", "metrics.csv", "config.yaml"):
+            shutil.copy(summary.parent / name, run / name)
+        rows.setdefault(s["env"], []).append(s)
+    for name in ("sweep_report.png", "sweep_report.md", "sweep_report.csv"):
+        shutil.copy(sweep / name, dest / name)
+    lines = ["| env | seeds | frames | train return, last 100 (mean +- std) | per seed | deterministic eval (mean +- std) | SPS per run |",
+             "|---|---|---|---|---|---|---|"]
+    for env, runs in sorted(rows.items()):
+        runs.sort(key=lambda s: s["seed"])
+        train = np.array([s["train_return_last100"] for s in runs])
+        evals = np.array([s["eval_return_mean"] for s in runs])
+        lines.append(f"| {env} | {','.join(str(s['seed']) for s in runs)} | {runs[0]['frames']:,} | "
+                     f"{train.mean():.0f} +- {train.std():.0f} | {', '.join(f'{x:.0f}' for x in train)} | "
+                     f"{evals.mean():.0f} +- {evals.std():.0f} | {np.mean([s['sps'] for s in runs]):.0f} |")
+    (dest / "table.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main(Path(sys.argv[1]), Path(sys.argv[2]))
