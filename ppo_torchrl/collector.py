@@ -5,9 +5,9 @@ Both backends return a TensorDict of batch size [num_envs, steps] with TorchRL's
 `truncated`. Observations and rewards are the normalized ones the learner sees; raw episode
 returns and lengths come from `pop_episodes()`.
 
-- `FastCollector` (default) steps Gymnasium's MuJoCo envs in-process with a lean loop: one
-  forward of the policy net per step, numpy normalization, no per-step TensorDict. The per-step
-  cost is close to the simulator's own.
+- `FastCollector` (default) steps Gymnasium's MuJoCo envs in-process with a lean loop: a numpy
+  copy of the policy net (`NumpyPolicy`), numpy normalization, no per-step TensorDict or torch op.
+  The per-step cost is close to the simulator's own.
 - `TorchRLCollector` is the reference pipeline, `torchrl.collectors.Collector` over
   `TransformedEnv(GymEnv)`; it is slower per step and kept for users who extend it with
   TorchRL transforms.
@@ -25,7 +25,7 @@ from torchrl.envs import ObservationNorm
 
 from ppo_torchrl.envs import get_env_state, make_gym_env, make_torchrl_env, set_env_state, torchrl_obs_stats
 from ppo_torchrl.errors import ConfigError
-from ppo_torchrl.models import ActorCritic, sample_action
+from ppo_torchrl.models import ActorCritic, NumpyPolicy
 from ppo_torchrl.normalization import ObservationNormalizer, ReturnNormalization, ReturnNormalizer, clip
 
 BACKENDS = ("fast", "torchrl")
@@ -35,6 +35,8 @@ class FastCollector:
     def __init__(self, cfg, ac: ActorCritic, seed: int, device: torch.device):
         t = cfg.env.transforms
         self.ac, self.device = ac, device
+        self.policy = NumpyPolicy(ac)
+        self.rng = np.random.default_rng(seed)  # the policy's exploration noise
         self.num_envs = cfg.collector.num_envs
         self.steps = cfg.collector.frames_per_batch // self.num_envs
         self.envs = [make_gym_env(cfg.env) for _ in range(self.num_envs)]
@@ -78,20 +80,19 @@ class FastCollector:
         act_dim = self.ac.action_low.shape[0]
         obs_buf = np.empty((steps, n, obs_dim), np.float32)
         next_buf = np.empty((steps, n, obs_dim), np.float32)
-        act_buf = torch.empty((steps, n, act_dim), device=self.device)
+        act_buf = np.empty((steps, n, act_dim), np.float32)
+        self.policy.sync()
+        noise = self.rng.standard_normal((steps, n, act_dim), dtype=np.float32)
         rew_buf = np.empty((steps, n), np.float32)
         term_buf = np.zeros((steps, n), bool)
         trunc_buf = np.zeros((steps, n), bool)
         raw_next = np.empty((n, obs_dim))
         reward = np.empty(n)
-        policy_net, ac, envs = self.ac.policy_net, self.ac, self.envs
+        act, envs = self.policy.act, self.envs
         obs = self._obs
         for t in range(steps):
             obs_buf[t] = obs
-            loc, scale = policy_net(torch.from_numpy(obs).to(self.device))
-            stored, to_env = sample_action(ac, loc, scale)
-            act_buf[t] = stored
-            to_env = to_env.cpu().numpy()
+            act_buf[t], to_env = act(obs, noise[t])
             reset_rows = []
             for i, env in enumerate(envs):
                 o, r, term, trunc, _ = env.step(to_env[i])
@@ -126,7 +127,7 @@ class FastCollector:
         return TensorDict(
             {
                 "observation": tensor(obs_buf),
-                "action": act_buf.transpose(0, 1).contiguous(),
+                "action": tensor(act_buf),
                 "next": {
                     "observation": tensor(next_buf),
                     "reward": tensor(rew_buf).unsqueeze(-1),
@@ -155,6 +156,7 @@ class FastCollector:
             "running_returns": self.return_norm.returns.copy(),
             "envs": [get_env_state(env) for env in self.envs],
             "current_obs": self._obs.copy(),
+            "rng": self.rng.bit_generator.state,
             "episode_return": self._episode_return.copy(),
             "episode_length": self._episode_length.copy(),
         }
@@ -171,6 +173,8 @@ class FastCollector:
             for env, env_state in zip(self.envs, envs):
                 set_env_state(env, env_state)
             self._obs = state["current_obs"].copy()
+            if "rng" in state:
+                self.rng.bit_generator.state = state["rng"]
             self._episode_return = state["episode_return"].copy()
             self._episode_length = state["episode_length"].copy()
             self.return_norm.returns = state["running_returns"].copy()

@@ -156,7 +156,9 @@ class Config:
     seed: int = 1
     device: str = "cpu"  # cpu | cuda | auto: networks and the update; the simulator stays on CPU
     torch_threads: int = 1  # small MLPs run fastest single-threaded
-    compile: bool = False  # torch.compile the loss
+    # torch.compile the loss step: auto | true | false. auto compiles runs of >= 150k frames, where
+    # the one-off compile (~12 s, ~2 s once cached) is repaid: the update runs ~1.6x faster.
+    compile: str = "auto"
     resume: Optional[str] = None  # a run dir: continue it from checkpoints/last.pt
 
 

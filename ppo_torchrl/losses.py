@@ -7,7 +7,10 @@ is one entry in LOSSES.
 
 from __future__ import annotations
 
-from typing import Callable, Dict
+from typing import Callable, Dict, Tuple
+
+import torch
+from tensordict import TensorDictBase
 
 from torchrl.objectives import A2CLoss, ClipPPOLoss, KLPENPPOLoss, LossModule, PPOLoss, ReinforceLoss
 
@@ -22,7 +25,7 @@ def _ppo_kwargs(cfg) -> dict:
         samples_mc_entropy=cfg.entropy_samples,
         critic_coeff=cfg.critic_coef,
         loss_critic_type=cfg.critic_loss,
-        normalize_advantage=False,  # the trainer normalizes per minibatch, the same for every loss
+        normalize_advantage=False,  # loss_step normalizes per minibatch, the same for every loss
         clip_value=cfg.clip_value,
         functional=False,  # use the modules' own parameters: no per-call parameter re-wrapping
     )
@@ -68,8 +71,29 @@ LOSSES: Dict[str, Callable[[object, ActorCritic], LossModule]] = {
     "reinforce": _reinforce,
 }
 
+# Losses torch.compile cannot take whole: KLPENPPOLoss updates its KL coefficient in place inside
+# forward, which inductor refuses. compile=auto leaves these eager.
+NOT_COMPILABLE = {"kl_ppo": "its adaptive KL coefficient is updated in place inside the loss"}
+
 
 def make_loss(cfg, ac: ActorCritic) -> LossModule:
     if cfg.name not in LOSSES:
         raise ConfigError(f"loss.name='{cfg.name}' is not a known loss; use one of {', '.join(LOSSES)}")
     return LOSSES[cfg.name](cfg, ac)
+
+
+def make_loss_step(loss_module: LossModule, normalize_advantage: bool) -> Callable:
+    """minibatch -> (summed loss, the loss module's output): the region `compile` compiles whole.
+
+    Advantages are normalized per minibatch here, the same for every loss (the modules' own
+    option is off), as CleanRL and SB3 do.
+    """
+
+    def loss_step(minibatch: TensorDictBase) -> Tuple[torch.Tensor, TensorDictBase]:
+        if normalize_advantage:
+            adv = minibatch.get("advantage")
+            minibatch.set("advantage", (adv - adv.mean()) / (adv.std() + 1e-8))
+        out = loss_module(minibatch)
+        return sum(v for k, v in out.items() if k.startswith("loss_")), out
+
+    return loss_step

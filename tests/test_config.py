@@ -74,8 +74,10 @@ def test_unknown_group_option_fails():
         ("collector.total_frames=100", "total_frames"),
         ("env.transforms.obs_norm=whiten", "obs_norm"),
         ("collector.num_envs=3", "num_envs"),
+        ("compile=maybe", "compile"),
+        ("compile=true loss=kl_ppo", "kl_ppo"),
     ],
 )
 def test_out_of_range_values_are_config_errors(override, message):
     with pytest.raises(ConfigError, match=message):
-        validate_config(compose_config([override]))
+        validate_config(compose_config(override.split()))

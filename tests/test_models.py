@@ -5,7 +5,7 @@ from tensordict import TensorDict
 from torchrl.modules import TanhNormal
 
 from ppo_torchrl.envs import EnvSpec
-from ppo_torchrl.models import deterministic_action, make_actor_critic, sample_action
+from ppo_torchrl.models import NumpyPolicy, deterministic_action, make_actor_critic
 from conftest import compose_config
 
 SPEC = EnvSpec(obs_dim=5, action_dim=2, action_low=np.array([-1.0, -3.0], np.float32),
@@ -16,33 +16,59 @@ def build(*overrides):
     return make_actor_critic(compose_config(list(overrides)).policy, SPEC)
 
 
-def test_tanh_sample_matches_torchrl_tanh_normal():
-    ac = build("policy=tanh_normal")
-    loc, scale = torch.randn(64, 2), torch.rand(64, 2) + 0.1
-    torch.manual_seed(0)
-    ours, to_env = sample_action(ac, loc, scale)
-    torch.manual_seed(0)
-    theirs = TanhNormal(loc, scale, low=ac.action_low, high=ac.action_high).rsample()
-    torch.testing.assert_close(ours, theirs)
-    assert torch.equal(ours, to_env)
-    assert (ours >= ac.action_low).all() and (ours <= ac.action_high).all()
+def draw(ac, obs: torch.Tensor, seed: int = 0):
+    """NumpyPolicy's draw with the noise torch's own rsample would use under the same seed."""
+    torch.manual_seed(seed)
+    noise = torch.randn(obs.shape[0], SPEC.action_dim).numpy()
+    return NumpyPolicy(ac).act(obs.numpy(), noise)
+
+
+@pytest.mark.parametrize("overrides", [["policy=tanh_normal"], ["policy=tanh_normal", "policy.std=state_dependent",
+                                                                 "policy.activation=elu", "policy.std_min=0.2"]])
+def test_numpy_policy_draws_what_torchrl_tanh_normal_draws(overrides):
+    ac = build(*overrides)
+    obs = torch.randn(64, 5)
+    with torch.no_grad():
+        loc, scale = ac.policy_net(obs)
+        torch.manual_seed(0)
+        theirs = TanhNormal(loc, scale, low=ac.action_low, high=ac.action_high).rsample()
+    ours, to_env = draw(ac, obs)
+    torch.testing.assert_close(torch.from_numpy(ours), theirs, atol=1e-5, rtol=1e-5)
+    assert np.array_equal(ours, to_env)
+    assert (ours >= SPEC.action_low).all() and (ours <= SPEC.action_high).all()
+
+
+def test_numpy_policy_follows_the_weights_after_sync():
+    ac = build("policy=tanh_normal", "policy.activation=relu", "policy.shared_trunk=true")
+    policy = NumpyPolicy(ac)
+    obs = torch.randn(8, 5)
+    with torch.no_grad():
+        for p in ac.policy_net.parameters():
+            p.add_(0.1)
+        loc, scale = ac.policy_net(obs)
+    assert not np.allclose(policy.loc_scale(obs.numpy())[0], loc.numpy(), atol=1e-4)  # still the old copy
+    policy.sync()
+    new_loc, new_scale = policy.loc_scale(obs.numpy())
+    np.testing.assert_allclose(new_loc, loc.numpy(), rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(np.broadcast_to(new_scale, scale.shape), scale.numpy(), rtol=1e-5, atol=1e-5)
 
 
 def test_normal_stores_raw_sample_and_clips_what_the_env_gets():
     ac = build("policy=normal")
-    loc = torch.tensor([[5.0, -5.0]])
-    stored, to_env = sample_action(ac, loc, torch.full((1, 2), 1e-3))
+    policy = NumpyPolicy(ac)
+    policy.loc_scale = lambda obs: (np.array([[5.0, -5.0]], np.float32), np.full((1, 2), 1e-3, np.float32))
+    stored, to_env = policy.act(np.zeros((1, 5), np.float32), np.zeros((1, 2), np.float32))
     assert stored[0, 0] > 4.9 and stored[0, 1] < -4.9
-    torch.testing.assert_close(to_env, torch.tensor([[1.0, -3.0]]))
-    torch.testing.assert_close(deterministic_action(ac, loc), torch.tensor([[1.0, -3.0]]))
+    np.testing.assert_allclose(to_env, [[1.0, -3.0]])
+    torch.testing.assert_close(deterministic_action(ac, torch.tensor([[5.0, -5.0]])), torch.tensor([[1.0, -3.0]]))
 
 
 def test_actor_log_prob_of_fast_path_actions_is_finite():
     for head in ("normal", "tanh_normal"):
         ac = build(f"policy={head}")
         obs = torch.randn(32, 5)
-        loc, scale = ac.policy_net(obs)
-        action, _ = sample_action(ac, loc, scale)
+        action, _ = draw(ac, obs)
+        action = torch.from_numpy(action)
         td = TensorDict({"observation": obs, "action": action}, [32])
         lp = ac.actor.get_dist(td).log_prob(action)
         assert lp.shape == (32,) and torch.isfinite(lp).all()

@@ -6,7 +6,8 @@ import pytest
 import torch
 
 from ppo_torchrl.collector import FastCollector
-from ppo_torchrl.trainer import Trainer
+from ppo_torchrl.losses import make_loss_step
+from ppo_torchrl.trainer import LOSS_INPUT_KEYS, Trainer, use_compile
 
 LOSSES = ["clip_ppo", "kl_ppo", "ppo", "a2c", "reinforce"]
 HEADS = ["normal", "tanh_normal"]
@@ -77,3 +78,25 @@ def test_same_seed_same_first_iterations(tiny_cfg, tmp_path):
         Trainer(tiny_cfg("seed=3"), tmp_path / name).train()
         rows.append((tmp_path / name / "metrics.csv").read_text().splitlines()[1].split(",")[4:])
     assert rows[0] == rows[1]
+
+
+@pytest.mark.parametrize("overrides", [[], ["loss=a2c", "policy=tanh_normal"]])
+def test_compiled_loss_step_matches_eager(tiny_cfg, tmp_path, overrides):
+    trainer = Trainer(tiny_cfg("compile=true", *overrides), tmp_path)
+    batch = trainer.collector.collect()
+    trainer.prepare(batch)
+    minibatch = batch.reshape(-1)[:64].select(*LOSS_INPUT_KEYS, strict=False)
+    eager_loss, eager_out = make_loss_step(trainer.loss_module, True)(minibatch.clone())
+    compiled_loss, compiled_out = trainer.loss_step(minibatch.clone())
+    torch.testing.assert_close(compiled_loss, eager_loss, rtol=1e-4, atol=1e-5)
+    for key in eager_out.keys():
+        torch.testing.assert_close(compiled_out.get(key), eager_out.get(key), rtol=1e-4, atol=1e-5)
+    assert trainer.train()["status"] == "finished"
+
+
+def test_compile_auto_only_for_long_runs(tiny_cfg):
+    assert not use_compile(tiny_cfg())
+    assert use_compile(tiny_cfg("collector.total_frames=1000000"))
+    assert not use_compile(tiny_cfg("collector.total_frames=1000000", "compile=false"))
+    assert use_compile(tiny_cfg("compile=true"))
+    assert not use_compile(tiny_cfg("collector.total_frames=1000000", "loss=kl_ppo"))  # not compilable
