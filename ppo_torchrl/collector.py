@@ -9,7 +9,7 @@ returns and lengths come from `pop_episodes()`.
   copy of the policy net (`NumpyPolicy`), numpy normalization, no per-step TensorDict or torch op.
   The per-step cost is close to the simulator's own.
 - `TorchRLCollector` is the reference pipeline, `torchrl.collectors.Collector` over
-  `TransformedEnv(GymEnv)`; it is slower per step and kept for users who extend it with
+  `TransformedEnv(GymWrapper)`; it is slower per step and kept for users who extend it with
   TorchRL transforms.
 """
 
@@ -51,6 +51,7 @@ class FastCollector:
         if t.obs_norm == "fixed":
             self._fit_fixed_obs_stats(t.obs_norm_init_frames, seed)
         raw = np.stack([env.reset(seed=seed + i)[0] for i, env in enumerate(self.envs)])
+        self._first_raw_obs = raw  # re-normalized if stats are loaded before the first batch
         self._obs = self.obs_norm(raw)
         self._episode_return = np.zeros(self.num_envs)
         self._episode_length = np.zeros(self.num_envs, np.int64)
@@ -118,6 +119,7 @@ class FastCollector:
             next_buf[t] = next_obs
             rew_buf[t] = self._scale_rewards(reward, term_buf[t] | trunc_buf[t])
         self._obs = obs
+        self._first_raw_obs = None
 
         def tensor(x: np.ndarray) -> torch.Tensor:  # [steps, n, ...] -> [n, steps, ...]
             return torch.from_numpy(np.ascontiguousarray(np.swapaxes(x, 0, 1))).to(self.device)
@@ -169,6 +171,8 @@ class FastCollector:
         if state.get("return") is not None:
             self.return_norm.stats.load_state_dict(state["return"])
         envs = state.get("envs")
+        if envs is None and self._first_raw_obs is not None:  # stats only (init_from), nothing collected yet
+            self._obs = self.obs_norm(self._first_raw_obs, update=False)
         if envs is not None and len(envs) == self.num_envs and state["current_obs"].shape == self._obs.shape:
             for env, env_state in zip(self.envs, envs):
                 set_env_state(env, env_state)
@@ -185,7 +189,7 @@ class FastCollector:
 
 
 class TorchRLCollector:
-    """`torchrl.collectors.Collector` over `TransformedEnv(GymEnv)`, same batch layout."""
+    """`torchrl.collectors.Collector` over `TransformedEnv(GymWrapper)`, same batch layout."""
 
     def __init__(self, cfg, ac: ActorCritic, seed: int, device: torch.device):
         self.env = make_torchrl_env(cfg.env, clip_actions=ac.head == "normal", gamma=cfg.advantage.gamma,

@@ -32,12 +32,32 @@ class TransformsConfig:
 
 
 @dataclass
+class LocomotionConfig:
+    """Reward and termination of an MJCF locomotion env (env=mjcf; Gymnasium Ant-v5's knobs)."""
+
+    forward_reward_weight: float = 1.0  # x velocity of main_body, m/s
+    healthy_reward: float = 1.0  # per step while main_body's z is inside healthy_z_range
+    healthy_z_range: List[float] = field(default_factory=lambda: [0.2, 1.0])
+    terminate_when_unhealthy: bool = True  # the episode ends when the robot falls
+    ctrl_cost_weight: float = 0.5  # times sum(action^2)
+    contact_cost_weight: float = 5e-4  # times sum(clipped external contact forces^2)
+    frame_skip: int = 5  # physics steps per action: control at 1 / (timestep * frame_skip) Hz
+    reset_noise_scale: float = 0.1  # uniform noise on qpos, normal on qvel, at reset
+    main_body: str = "1"  # body name or id whose x velocity is rewarded and z is checked
+    contact_forces_in_observation: bool = False  # append cfrc_ext to the observation
+
+
+@dataclass
 class EnvConfig:
     """Which Gymnasium environment to train on (envs.py)."""
 
     id: str = MISSING  # a registered Gymnasium continuous-control id, e.g. Hopper-v4
     max_episode_steps: Optional[int] = None  # None: the id's registered time limit
     make_kwargs: Dict[str, Any] = field(default_factory=dict)  # extra gymnasium.make kwargs
+    # env=mjcf: the robot's MJCF file, run as a locomotion env (Gymnasium's Ant-v5 class). A path, or
+    # the name of a model shipped in ppo_torchrl/assets (quadruped.xml, quadruped_step.xml).
+    xml_file: Optional[str] = None
+    locomotion: LocomotionConfig = field(default_factory=LocomotionConfig)
     transforms: TransformsConfig = field(default_factory=TransformsConfig)
 
 
@@ -109,7 +129,7 @@ class CollectorConfig:
     total_frames: int = 1_000_000
     num_envs: int = 1
     # fast: in-process gymnasium envs stepped by a lean loop that writes TorchRL-layout batches;
-    # torchrl: torchrl.collectors.Collector over TransformedEnv(GymEnv). Same algorithm, same keys.
+    # torchrl: torchrl.collectors.Collector over TransformedEnv(GymWrapper). Same algorithm, same keys.
     backend: str = "fast"
 
 
@@ -131,6 +151,7 @@ class EvalConfig:
     final_episodes: int = 10  # at the end of training; 0 disables
     deterministic: bool = True
     video: bool = False  # film the first episode of each eval into <run dir>/videos/ (MUJOCO_GL=egl)
+    success_x: Optional[float] = None  # also report the share of episodes that end beyond this x (m)
 
 
 @dataclass
@@ -160,6 +181,10 @@ class Config:
     # the one-off compile (~12 s, ~2 s once cached) is repaid: the update runs ~1.6x faster.
     compile: str = "auto"
     resume: Optional[str] = None  # a run dir: continue it from checkpoints/last.pt
+    # Transfer: start a new run from another run's weights and normalization stats (its best.pt, or
+    # a checkpoint file); init_from_optimizer also takes its optimizer state.
+    init_from: Optional[str] = None
+    init_from_optimizer: bool = False
 
 
 def register_configs() -> None:

@@ -2,7 +2,7 @@
 
 Two ways to step an env share these builders:
 - `make_gym_env` gives the real Gymnasium MuJoCo env that the fast collector steps directly;
-- `make_torchrl_env` gives `TransformedEnv(GymEnv(...))` with the TorchRL transforms, used by the
+- `make_torchrl_env` gives `TransformedEnv(GymWrapper(...))` with the TorchRL transforms, used by the
   `collector.backend=torchrl` pipeline and, with frozen statistics, by evaluation and export checks.
 """
 
@@ -21,7 +21,7 @@ from torchrl.envs import (
     ClipTransform,
     Compose,
     DoubleToFloat,
-    GymEnv,
+    GymWrapper,
     ObservationNorm,
     RewardClipping,
     RewardScaling,
@@ -41,6 +41,10 @@ warnings.filterwarnings("ignore", message=".*is out of date.*")
 warnings.filterwarnings("ignore", category=DeprecationWarning, module="gymnasium")
 
 CONF_ENV_DIR = Path(__file__).resolve().parent.parent / "conf" / "env"
+ASSETS_DIR = Path(__file__).resolve().parent / "assets"
+MJCF_ENV_ID = "Ant-v5"  # Gymnasium's locomotion class that takes any model through xml_file
+# The video camera follows the robot (mjCAMERA_TRACKING on body 1), a little above and behind.
+TRACKING_CAMERA = {"type": 1, "trackbodyid": 1, "distance": 3.0, "elevation": -15.0, "azimuth": 120.0}
 
 
 @dataclass(frozen=True)
@@ -68,13 +72,82 @@ def check_env_id(env_id: str) -> None:
         )
 
 
-def make_gym_env(env_cfg, render_mode: Optional[str] = None) -> gym.Env:
+def env_label(env_cfg) -> str:
+    """How runs name their env: the id, or the id and model file for env=mjcf (Ant-v5:quadruped.xml)."""
+    xml_file = env_cfg.get("xml_file")
+    return f"{env_cfg.get('id')}:{Path(xml_file).name}" if xml_file else str(env_cfg.get("id"))
+
+
+def resolve_model_file(xml_file: str) -> Path:
+    """A path as given (absolute or from the working dir), else a model shipped in assets/."""
+    path = Path(xml_file).expanduser()
+    if path.is_file():
+        return path.resolve()
+    if (ASSETS_DIR / xml_file).is_file():
+        return ASSETS_DIR / xml_file
+    shipped = ", ".join(sorted(p.name for p in ASSETS_DIR.glob("*.xml")))
+    raise ConfigError(f"env.xml_file={xml_file}: no such file (a path, or a shipped model: {shipped})")
+
+
+@functools.lru_cache(maxsize=None)
+def check_mjcf(path: Path) -> None:
+    """The model must compile in MuJoCo, have a free-floating base and at least one actuator."""
+    import mujoco
+
+    try:
+        model = mujoco.MjModel.from_xml_path(str(path))
+    except ValueError as exc:
+        first = next((l.strip() for l in str(exc).splitlines() if l.strip()), type(exc).__name__)
+        raise ConfigError(f"env.xml_file={path} is not a valid MuJoCo model: {first}") from None
+    if not (model.jnt_type == mujoco.mjtJoint.mjJNT_FREE).any():
+        raise ConfigError(f"env.xml_file={path} has no free joint: env=mjcf needs a free-floating base "
+                          "(add <freejoint/> to the robot's root body)")
+    if model.nu == 0:
+        raise ConfigError(f"env.xml_file={path} has no actuators: there is nothing for the policy to control")
+
+
+def mjcf_kwargs(env_cfg) -> dict:
+    """gymnasium.make kwargs that turn Ant-v5 into the locomotion env of env.xml_file."""
+    if env_cfg.id != MJCF_ENV_ID:
+        raise ConfigError(f"env.xml_file needs env.id={MJCF_ENV_ID} (the locomotion env class that loads it), "
+                          f"not {env_cfg.id}")
+    path = resolve_model_file(env_cfg.xml_file)
+    check_mjcf(path)
+    loco = env_cfg.locomotion
+    low, high = loco.healthy_z_range
+    if not low < high:
+        raise ConfigError(f"env.locomotion.healthy_z_range={list(loco.healthy_z_range)} must be [low, high] with low < high")
+    main_body = int(loco.main_body) if str(loco.main_body).isdigit() else str(loco.main_body)
+    return {
+        "xml_file": str(path),
+        "forward_reward_weight": loco.forward_reward_weight,
+        "healthy_reward": loco.healthy_reward,
+        "healthy_z_range": (low, high),
+        "terminate_when_unhealthy": loco.terminate_when_unhealthy,
+        "ctrl_cost_weight": loco.ctrl_cost_weight,
+        "contact_cost_weight": loco.contact_cost_weight,
+        "frame_skip": loco.frame_skip,
+        "reset_noise_scale": loco.reset_noise_scale,
+        "main_body": main_body,
+        "include_cfrc_ext_in_observation": loco.contact_forces_in_observation,
+        "default_camera_config": dict(TRACKING_CAMERA),
+    }
+
+
+def gym_make_kwargs(env_cfg, render_mode: Optional[str] = None, **render_kwargs) -> dict:
+    """What `gymnasium.make(env.id, ...)` gets: the MJCF model and knobs, time limit, make_kwargs."""
     check_env_id(env_cfg.id)
-    kwargs = dict(env_cfg.make_kwargs or {})
+    kwargs = mjcf_kwargs(env_cfg) if env_cfg.get("xml_file") else {}
+    kwargs.update(env_cfg.make_kwargs or {})
     if env_cfg.max_episode_steps is not None:
         kwargs["max_episode_steps"] = env_cfg.max_episode_steps
     if render_mode is not None:
-        kwargs["render_mode"] = render_mode
+        kwargs.update(render_mode=render_mode, **render_kwargs)
+    return kwargs
+
+
+def make_gym_env(env_cfg, render_mode: Optional[str] = None, **render_kwargs) -> gym.Env:
+    kwargs = gym_make_kwargs(env_cfg, render_mode, **render_kwargs)
     # The passive checker re-validates every step; the id is checked once above instead.
     env = gym.make(env_cfg.id, disable_env_checker=True, **kwargs)
     if not isinstance(env.action_space, gym.spaces.Box):
@@ -99,6 +172,10 @@ def env_spec(env_cfg) -> EnvSpec:
     return spec
 
 
+def _wrapped_gym_env(env_cfg, device: str, render_mode: Optional[str], render_kwargs: dict) -> GymWrapper:
+    return GymWrapper(make_gym_env(env_cfg, render_mode, **render_kwargs), device=device)
+
+
 def make_torchrl_env(
     env_cfg,
     *,
@@ -111,25 +188,19 @@ def make_torchrl_env(
     num_envs: int = 1,
     **render_kwargs,
 ) -> TransformedEnv:
-    """`TransformedEnv(GymEnv)` with the configured transforms.
+    """`TransformedEnv(GymWrapper(gymnasium env))` with the configured transforms.
 
     train=True: running statistics (VecNorm) or ObservationNorm fitted on initial rollouts, and
     reward normalization, as the collector needs them.
     train=False: observation statistics frozen from `obs_stats` (mean/var) into an ObservationNorm,
     rewards left raw: the evaluation env, whose returns are the ones a user compares.
     """
-    check_env_id(env_cfg.id)
     t = env_cfg.transforms
-    kwargs = dict(env_cfg.make_kwargs or {})
-    if env_cfg.max_episode_steps is not None:
-        kwargs["max_episode_steps"] = env_cfg.max_episode_steps
-    if render_mode is not None:
-        kwargs.update(render_mode=render_mode, **render_kwargs)
-    if num_envs == 1:
-        base = GymEnv(env_cfg.id, device=device, disable_env_checker=True, **kwargs)
-    else:  # one process, envs stepped in turn (the simulator is fast; processes would cost more)
-        base = SerialEnv(num_envs, functools.partial(GymEnv, env_cfg.id, device=device,
-                                                     disable_env_checker=True, **kwargs))
+    # The same gymnasium env the fast collector steps, wrapped (GymEnv(id, frame_skip=...) would take
+    # frame_skip as its own action repeat instead of passing it to the MuJoCo env).
+    make = functools.partial(_wrapped_gym_env, env_cfg, device, render_mode, render_kwargs)
+    # several envs: one process, stepped in turn (the simulator is fast; processes would cost more)
+    base = make() if num_envs == 1 else SerialEnv(num_envs, make)
     transforms = []
     if clip_actions:  # Normal head: the env gets the clipped action, the batch keeps the sample
         spec = base.action_spec

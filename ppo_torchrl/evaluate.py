@@ -1,6 +1,6 @@
 """Deterministic evaluation on a separate TorchRL env with frozen normalization statistics.
 
-The eval env is `TransformedEnv(GymEnv)` with an `ObservationNorm` holding the training stats (no
+The eval env is `TransformedEnv(GymWrapper)` with an `ObservationNorm` holding the training stats (no
 updates) and raw rewards, and the actor runs in DETERMINISTIC exploration mode (the mean, squashed
 or clipped to the bounds). It shares no state with the training envs.
 
@@ -20,7 +20,7 @@ import numpy as np
 import torch
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
-from ppo_torchrl.envs import episode_seeds, make_torchrl_env
+from ppo_torchrl.envs import env_label, episode_seeds, make_torchrl_env
 from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.models import ActorCritic
 
@@ -38,21 +38,25 @@ def evaluate_policy(cfg, ac: ActorCritic, obs_stats: Optional[dict], episodes: i
     # The simulator runs on CPU; a CPU copy of the (small) actor avoids device hops per step.
     actor = ac.actor if ac.action_low.device.type == "cpu" else copy.deepcopy(ac.actor).cpu()
     mode = ExplorationType.DETERMINISTIC if deterministic else ExplorationType.RANDOM
-    returns, lengths, frames = [], [], []
+    returns, lengths, frames, distances = [], [], [], []
+    gym_env = env.base_env._env
+    sim = getattr(gym_env.unwrapped, "data", None)  # MuJoCo envs: qpos[0] is the base's x
     try:
         with set_exploration_type(mode):
             for i, episode_seed in enumerate(episode_seeds(seed, episodes)):
                 env.set_seed(episode_seed)
                 start = env.reset()
+                x_start = float(sim.qpos[0]) if sim is not None else None
                 callback = None
                 if video_path is not None and i == 0:  # film the first episode, frame after frame
-                    gym_env = env.base_env._env
                     frames.append(gym_env.render())
                     callback = lambda *_: frames.append(gym_env.render())  # noqa: E731
                 rollout = env.rollout(max_steps=1_000_000, policy=actor, break_when_any_done=True,
                                       auto_reset=False, tensordict=start, callback=callback)
                 returns.append(float(rollout.get(("next", "reward")).sum()))
                 lengths.append(int(rollout.shape[-1]))
+                if sim is not None:
+                    distances.append((x_start, float(sim.qpos[0])))
     except Exception as exc:
         if video_path is not None and not frames:
             raise ConfigError(f"rendering is unavailable here ({type(exc).__name__}: {str(exc).splitlines()[0]}); "
@@ -62,7 +66,7 @@ def evaluate_policy(cfg, ac: ActorCritic, obs_stats: Optional[dict], episodes: i
         env.close()
     if video_path is not None:
         write_video(video_path, frames)
-    return {
+    result = {
         "return_mean": float(np.mean(returns)),
         "return_std": float(np.std(returns)),
         "length_mean": float(np.mean(lengths)),
@@ -70,6 +74,26 @@ def evaluate_policy(cfg, ac: ActorCritic, obs_stats: Optional[dict], episodes: i
         "returns": returns,
         "lengths": lengths,
     }
+    if distances:
+        # Forward progress of the base: mean velocity over each episode, and where it ended.
+        dt = gym_env.unwrapped.dt
+        velocities = [(x1 - x0) / (n * dt) for (x0, x1), n in zip(distances, lengths)]
+        result.update(forward_velocity_mean=float(np.mean(velocities)), forward_velocity_std=float(np.std(velocities)),
+                      x_final_mean=float(np.mean([x1 for _, x1 in distances])))
+        if cfg.eval.get("success_x") is not None:
+            result["success_rate"] = float(np.mean([x1 >= cfg.eval.success_x for _, x1 in distances]))
+            result["success_x"] = float(cfg.eval.success_x)
+    return result
+
+
+def motion_line(result: dict) -> str:
+    """'; forward velocity 0.52 +- 0.04 m/s[, 80% beyond x=2.5 m]' where the env reports motion."""
+    if "forward_velocity_mean" not in result:
+        return ""
+    line = f"; forward velocity {result['forward_velocity_mean']:.2f} +- {result['forward_velocity_std']:.2f} m/s"
+    if "success_rate" in result:
+        line += f", {result['success_rate']:.0%} of episodes end beyond x={result['success_x']} m"
+    return line
 
 
 def write_video(path: Path, frames: list) -> None:
@@ -92,12 +116,12 @@ def main(argv: list[str]) -> dict:
     video = run_dir / "eval" / f"{args['checkpoint'] if args['checkpoint'] in ('best', 'last') else 'checkpoint'}.mp4"
     result = evaluate_policy(cfg, ac, state["normalization"]["obs"], args["episodes"], seed=args["seed"],
                              video_path=video if args["video"] else None)
-    result.update(env=cfg.env.id, checkpoint=args["checkpoint"], checkpoint_frames=state["frames"],
+    result.update(env=env_label(cfg.env), checkpoint=args["checkpoint"], checkpoint_frames=state["frames"],
                   episodes=args["episodes"], video=str(video) if args["video"] else None)
     atomic_write_json(run_dir / "eval" / "eval.json", result)
-    print(f"{cfg.env.id} @ {state['frames']} frames ({args['checkpoint']}): return {result['return_mean']:.1f} +- "
+    print(f"{env_label(cfg.env)} @ {state['frames']} frames ({args['checkpoint']}): return {result['return_mean']:.1f} +- "
           f"{result['return_std']:.1f}, length {result['length_mean']:.0f} +- {result['length_std']:.0f} "
-          f"over {args['episodes']} episodes" + (f"; video: {video}" if args["video"] else ""))
+          f"over {args['episodes']} episodes" + motion_line(result) + (f"; video: {video}" if args["video"] else ""))
     return result
 
 

@@ -25,7 +25,7 @@ from ppo_torchrl import checkpoint
 from ppo_torchrl.advantage import explained_variance, make_advantage
 from ppo_torchrl.checkpoint import CheckpointManager
 from ppo_torchrl.collector import make_collector
-from ppo_torchrl.envs import env_spec, seed_everything
+from ppo_torchrl.envs import env_label, env_spec, seed_everything
 from ppo_torchrl.errors import ConfigError, Interrupted, TrainingError
 from ppo_torchrl.evaluate import evaluate_policy
 from ppo_torchrl.loggers import MetricsFile, Progress, close_logger, make_logger, truncate_logs
@@ -41,14 +41,14 @@ CRITIC_LOSSES = ("l2", "l1", "smooth_l1")
 COLUMNS = [
     "iteration", "frames", "time_s", "sps", "lr",
     "train/episode_return", "train/episode_length", "train/return_last100", "train/episodes",
-    "eval/return_mean", "eval/return_std", "eval/length_mean",
+    "eval/return_mean", "eval/return_std", "eval/length_mean", "eval/forward_velocity", "eval/success_rate",
     "loss/objective", "loss/critic", "loss/entropy", "loss/total",
     "train/entropy", "train/approx_kl", "train/clipfrac", "train/explained_variance", "train/grad_norm",
     "policy/loc_mean", "policy/scale_mean", "train/value_mean", "train/advantage_std",
 ]
-# TorchRL loss output key -> our metric name
 LOSS_INPUT_KEYS = ("observation", "action", "action_log_prob", "advantage", "value_target", "state_value",
                    "loc", "scale")
+# TorchRL loss output key -> our metric name
 LOSS_METRICS = {
     "loss_objective": "loss/objective", "loss_actor": "loss/objective",
     "loss_critic": "loss/critic", "loss_value": "loss/critic",
@@ -203,6 +203,8 @@ class Trainer:
         self.resumed = resume is not None
         if resume is not None:
             self._restore(resume)
+        elif cfg.init_from:
+            self._init_from(cfg.init_from, cfg.init_from_optimizer)
 
     def _restore(self, state: dict) -> None:
         """Continue from a checkpoint: weights, optimizer, stats, envs, counters and RNG streams."""
@@ -221,6 +223,32 @@ class Trainer:
         torch.set_rng_state(rng["torch"])
         np.random.set_state(rng["numpy"])
         random.setstate(rng["python"])
+
+    def _init_from(self, source: str, with_optimizer: bool) -> None:
+        """Transfer: weights and normalization stats (and optimizer state) of another run; counters,
+        envs and RNG streams start fresh. A run dir gives its best checkpoint."""
+        path = Path(source).expanduser()
+        if path.is_dir():
+            path = checkpoint.resolve_checkpoint(path, "best")
+        if not path.is_file():
+            raise ConfigError(f"init_from={source}: no such run dir or checkpoint file")
+        state = checkpoint.load(path)
+        check_spec(state, self.spec, self.cfg.env.id)
+        try:
+            self.ac.actor.load_state_dict(state["actor"])
+            self.ac.critic.load_state_dict(state["critic"])
+        except RuntimeError as exc:
+            detail = next((l.strip() for l in str(exc).splitlines() if "size mismatch" in l or "Missing" in l
+                           or "Unexpected" in l), str(exc).splitlines()[0])
+            raise ConfigError(f"init_from={source}: its networks do not fit this run's policy config "
+                              f"({detail.rstrip('.')}); use the same policy.* settings as that run") from None
+        if with_optimizer:
+            self.optimizer.load_state_dict(state["optimizer"])
+        norm = state["normalization"]
+        self.collector.load_state_dict({"obs": norm.get("obs"), "return": norm.get("return")})
+        source_env = state.get("config", {}).get("env", {})
+        print(f"init_from: weights{', optimizer' if with_optimizer else ''} and normalization stats of {path} "
+              f"({state['frames']} frames on {env_label(source_env)})", file=sys.stderr)
 
     # ---------------------------------------------------------------- the loop
     def train(self) -> dict:
@@ -372,8 +400,11 @@ class Trainer:
                                  seed=self.cfg.seed + 10_000, deterministic=self.cfg.eval.deterministic,
                                  video_path=video)
         self.last_eval = {"frames": self.frames, **result}
-        return {"eval/return_mean": result["return_mean"], "eval/return_std": result["return_std"],
-                "eval/length_mean": result["length_mean"]}
+        row = {"eval/return_mean": result["return_mean"], "eval/return_std": result["return_std"],
+               "eval/length_mean": result["length_mean"],
+               "eval/forward_velocity": result.get("forward_velocity_mean"),
+               "eval/success_rate": result.get("success_rate")}
+        return {k: v for k, v in row.items() if v is not None}
 
     def _log(self, row: dict, last: bool) -> None:
         self.metrics.write(row)
@@ -409,7 +440,7 @@ class Trainer:
     def summary(self, status: str) -> dict:
         last_eval = self.last_eval or {}
         return {
-            "env": self.cfg.env.id,
+            "env": env_label(self.cfg.env),
             "seed": self.cfg.seed,
             "loss": self.cfg.loss.name,
             "policy": self.cfg.policy.head,
@@ -422,6 +453,7 @@ class Trainer:
             "eval_return_mean": last_eval.get("return_mean"),
             "eval_return_std": last_eval.get("return_std"),
             "eval_frames": last_eval.get("frames"),
+            **{k: last_eval[k] for k in ("forward_velocity_mean", "success_rate") if k in last_eval},
             "train_return_last100": float(np.mean(self.recent_returns)) if self.recent_returns else None,
             "best_eval_return": self.ckpt.best_return,
             "run_dir": str(self.run_dir),

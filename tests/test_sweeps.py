@@ -11,7 +11,8 @@ from ppo_torchrl.trainer import Trainer, validate_config
 
 from conftest import TINY, compose_config, run_cli
 
-PRESETS = ["arena_hopper", "practical_rl_halfcheetah", "reinforce_pendulum", "aidl_halfcheetah"]
+PRESETS = ["arena_hopper", "practical_rl_halfcheetah", "reinforce_pendulum", "aidl_halfcheetah", "aidl_anymal",
+           "aidl_anymal_step"]
 
 
 def test_joblib_multirun_runs_every_seed_in_parallel_and_the_report_summarizes_them(tmp_path):
@@ -81,3 +82,10 @@ def test_presets_carry_their_documents_settings():
     assert aidl.policy.shared_trunk and list(aidl.policy.hidden_sizes) == [64, 128] and aidl.policy.std_min == 0.25
     arena = compose_config(["experiment=arena_hopper"])
     assert arena.env.id == "Hopper-v4" and arena.eval.video
+    anymal = compose_config(["experiment=aidl_anymal"])
+    assert (anymal.env.xml_file, anymal.policy.std_min, anymal.optim.lr, anymal.loss.clip_epsilon) == \
+        ("quadruped.xml", 0.6, 1e-5, 0.1)
+    assert (anymal.loss.epochs, anymal.collector.frames_per_batch, anymal.loss.minibatch_size) == (48, 6400, 128)
+    assert (anymal.loss.critic_coef, anymal.loss.entropy_coef, anymal.env.max_episode_steps) == (1.0, 0.001, 400)
+    step = compose_config(["experiment=aidl_anymal_step"])
+    assert step.env.xml_file == "quadruped_step.xml" and step.init_from_optimizer and step.optim.lr == 1e-5
