@@ -15,9 +15,10 @@ warnings.filterwarnings("ignore")
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 
 from conftest import compose_config  # noqa: E402
+from speed import SB3_IDENTICAL  # noqa: E402  (the speed issue's settings, not the tuned per-env ones)
 from ppo_torchrl.trainer import Trainer  # noqa: E402
 
-cfg = compose_config(["env=Hopper-v4", "eval.every_frames=0", "eval.final_episodes=0", "logger=none",
+cfg = compose_config(["env=Hopper-v4", *SB3_IDENTICAL, "eval.every_frames=0", "eval.final_episodes=0", "logger=none",
                       "checkpoint.every_frames=0", *sys.argv[1:]])
 trainer = Trainer(cfg, Path("outputs") / "bench_phases")
 collect_s = update_s = 0.0

@@ -26,6 +26,11 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 ENV_ID = "Hopper-v4"
+# SB3's settings spelled out, so tuned per-env values in conf/env/Hopper-v4.yaml do not apply here.
+SB3_IDENTICAL = ["policy=normal", "policy.width=null", "policy.hidden_sizes=[64,64]", "policy.critic_hidden_sizes=[64,64]",
+                 "policy.activation=tanh", "loss=clip_ppo", "loss.epochs=10", "loss.minibatch_size=64",
+                 "loss.clip_epsilon=0.2", "loss.entropy_coef=0.0", "loss.critic_coef=0.5", "advantage.gamma=0.99",
+                 "advantage.lmbda=0.95", "optim.lr=3e-4", "optim.max_grad_norm=0.5"]
 
 
 def child_app(frames: int, num_envs: int, extra: list[str]) -> None:
@@ -35,7 +40,8 @@ def child_app(frames: int, num_envs: int, extra: list[str]) -> None:
     sys.argv = ["ppo_torchrl", f"env={ENV_ID}", f"collector.total_frames={frames}",
                 f"collector.num_envs={num_envs}", "collector.frames_per_batch=2048",
                 "eval.every_frames=0", "eval.final_episodes=0", "checkpoint.every_frames=0",
-                "checkpoint.keep_last=0", "logger=none", "torch_threads=1", f"hydra.run.dir={run_dir}", *extra]
+                "checkpoint.keep_last=0", "logger=none", "torch_threads=1", f"hydra.run.dir={run_dir}",
+                *SB3_IDENTICAL, *extra]
     runpy.run_module("ppo_torchrl", run_name="__main__")
     summary = json.loads((Path(run_dir) / "summary.json").read_text())
     report(inner_sps=summary["sps"])

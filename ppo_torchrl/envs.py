@@ -42,9 +42,9 @@ warnings.filterwarnings("ignore", category=DeprecationWarning, module="gymnasium
 
 CONF_ENV_DIR = Path(__file__).resolve().parent.parent / "conf" / "env"
 ASSETS_DIR = Path(__file__).resolve().parent / "assets"
-MJCF_ENV_ID = "Ant-v5"  # Gymnasium's locomotion class that takes any model through xml_file
-# The video camera follows the robot (mjCAMERA_TRACKING on body 1), a little above and behind.
-TRACKING_CAMERA = {"type": 1, "trackbodyid": 1, "distance": 3.0, "elevation": -15.0, "azimuth": 120.0}
+MJCF_ID = "mjcf"  # env.id of a robot given by its model file (env=mjcf env.xml_file=...)
+MJCF_ENV_ID = "Ant-v5"  # Gymnasium's locomotion class that runs it: it takes any model through xml_file
+TRACKING_CAMERA = "track"  # videos use a model camera of this name when there is one (it can follow the robot)
 
 
 @dataclass(frozen=True)
@@ -63,8 +63,8 @@ def env_files() -> list[str]:
 
 
 def check_env_id(env_id: str) -> None:
-    """Fail with one line unless `env_id` is a registered continuous-control Gymnasium env."""
-    if env_id not in gym.registry:
+    """Fail with one line unless `env_id` is a registered continuous-control Gymnasium env (or mjcf)."""
+    if env_id not in gym.registry and env_id != MJCF_ID:
         known = ", ".join(n for n in env_files() if n != "gym")
         raise ConfigError(
             f"unknown environment id '{env_id}': not registered in Gymnasium. "
@@ -73,7 +73,7 @@ def check_env_id(env_id: str) -> None:
 
 
 def env_label(env_cfg) -> str:
-    """How runs name their env: the id, or the id and model file for env=mjcf (Ant-v5:quadruped.xml)."""
+    """How runs name their env: the id, or the id and model file for env=mjcf (mjcf:quadruped.xml)."""
     xml_file = env_cfg.get("xml_file")
     return f"{env_cfg.get('id')}:{Path(xml_file).name}" if xml_file else str(env_cfg.get("id"))
 
@@ -90,8 +90,9 @@ def resolve_model_file(xml_file: str) -> Path:
 
 
 @functools.lru_cache(maxsize=None)
-def check_mjcf(path: Path) -> None:
-    """The model must compile in MuJoCo, have a free-floating base and at least one actuator."""
+def check_mjcf(path: Path) -> tuple:
+    """The model must compile in MuJoCo, have a free-floating base and at least one actuator.
+    Returns the model's camera names."""
     import mujoco
 
     try:
@@ -104,21 +105,23 @@ def check_mjcf(path: Path) -> None:
                           "(add <freejoint/> to the robot's root body)")
     if model.nu == 0:
         raise ConfigError(f"env.xml_file={path} has no actuators: there is nothing for the policy to control")
+    return tuple(model.camera(i).name for i in range(model.ncam))
 
 
 def mjcf_kwargs(env_cfg) -> dict:
     """gymnasium.make kwargs that turn Ant-v5 into the locomotion env of env.xml_file."""
-    if env_cfg.id != MJCF_ENV_ID:
-        raise ConfigError(f"env.xml_file needs env.id={MJCF_ENV_ID} (the locomotion env class that loads it), "
-                          f"not {env_cfg.id}")
+    if env_cfg.id not in (MJCF_ID, MJCF_ENV_ID):
+        raise ConfigError(f"env.xml_file needs env=mjcf (or env.id={MJCF_ENV_ID}), not env.id={env_cfg.id}")
     path = resolve_model_file(env_cfg.xml_file)
-    check_mjcf(path)
+    cameras = check_mjcf(path)
     loco = env_cfg.locomotion
     low, high = loco.healthy_z_range
     if not low < high:
         raise ConfigError(f"env.locomotion.healthy_z_range={list(loco.healthy_z_range)} must be [low, high] with low < high")
     main_body = int(loco.main_body) if str(loco.main_body).isdigit() else str(loco.main_body)
+    kwargs = {"camera_name": TRACKING_CAMERA} if TRACKING_CAMERA in cameras else {}
     return {
+        **kwargs,
         "xml_file": str(path),
         "forward_reward_weight": loco.forward_reward_weight,
         "healthy_reward": loco.healthy_reward,
@@ -130,13 +133,14 @@ def mjcf_kwargs(env_cfg) -> dict:
         "reset_noise_scale": loco.reset_noise_scale,
         "main_body": main_body,
         "include_cfrc_ext_in_observation": loco.contact_forces_in_observation,
-        "default_camera_config": dict(TRACKING_CAMERA),
     }
 
 
 def gym_make_kwargs(env_cfg, render_mode: Optional[str] = None, **render_kwargs) -> dict:
     """What `gymnasium.make(env.id, ...)` gets: the MJCF model and knobs, time limit, make_kwargs."""
     check_env_id(env_cfg.id)
+    if env_cfg.id == MJCF_ID and not env_cfg.get("xml_file"):
+        raise ConfigError("env=mjcf needs the robot's model file: env.xml_file=<path to an MJCF file with a free joint>")
     kwargs = mjcf_kwargs(env_cfg) if env_cfg.get("xml_file") else {}
     kwargs.update(env_cfg.make_kwargs or {})
     if env_cfg.max_episode_steps is not None:
@@ -149,7 +153,7 @@ def gym_make_kwargs(env_cfg, render_mode: Optional[str] = None, **render_kwargs)
 def make_gym_env(env_cfg, render_mode: Optional[str] = None, **render_kwargs) -> gym.Env:
     kwargs = gym_make_kwargs(env_cfg, render_mode, **render_kwargs)
     # The passive checker re-validates every step; the id is checked once above instead.
-    env = gym.make(env_cfg.id, disable_env_checker=True, **kwargs)
+    env = gym.make(MJCF_ENV_ID if env_cfg.id == MJCF_ID else env_cfg.id, disable_env_checker=True, **kwargs)
     if not isinstance(env.action_space, gym.spaces.Box):
         raise ConfigError(
             f"env '{env_cfg.id}' has a {type(env.action_space).__name__} action space; "

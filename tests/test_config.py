@@ -9,8 +9,8 @@ from conftest import compose_config
 
 
 def test_defaults_reproduce_the_cleanrl_mujoco_settings():
-    cfg = compose_config(["env=Hopper-v4"])
-    assert cfg.env.id == "Hopper-v4"
+    cfg = compose_config(["env=Walker2d-v4"])  # an env file without tuned values
+    assert cfg.env.id == "Walker2d-v4"
     assert (cfg.collector.frames_per_batch, cfg.collector.total_frames, cfg.collector.num_envs) == (2048, 1_000_000, 1)
     assert (cfg.loss.name, cfg.loss.epochs, cfg.loss.minibatch_size) == ("clip_ppo", 10, 64)
     assert cfg.collector.frames_per_batch // cfg.loss.minibatch_size == 32
@@ -28,6 +28,13 @@ def test_defaults_reproduce_the_cleanrl_mujoco_settings():
 @pytest.mark.parametrize("version", ["v4", "v5"])
 def test_every_env_file_composes(env, version):
     assert compose_config([f"env={env}-{version}"]).env.id == f"{env}-{version}"
+
+
+def test_hopper_file_carries_the_tuned_values_and_presets_keep_their_own():
+    hopper = compose_config(["env=Hopper-v4"])
+    assert (hopper.advantage.gamma, hopper.policy.width, hopper.loss.clip_epsilon, hopper.optim.lr) == (0.995, 128, 0.1, 1e-4)
+    arena = compose_config(["experiment=arena_hopper"])
+    assert (arena.advantage.gamma, arena.policy.width, arena.loss.clip_epsilon, arena.optim.lr) == (0.99, None, 0.2, 3e-4)
 
 
 def test_group_swaps_by_name():

@@ -30,8 +30,13 @@ def test_mjcf_runs_a_model_it_was_not_tuned_for(tiny_cfg, tmp_path):
     assert env.unwrapped.fullpath == str(GYM_ANT_XML) and env.unwrapped.frame_skip == 5
     assert env.observation_space.shape == (27,) and env.action_space.shape == (8,)  # no contact forces
     summary = Trainer(cfg, tmp_path).train()
-    assert summary["env"] == "Ant-v5:ant.xml" and summary["frames"] == 512
+    assert summary["env"] == "mjcf:ant.xml" and summary["frames"] == 512
     assert "forward_velocity_mean" in summary
+
+
+def test_mjcf_without_a_model_file_is_an_error():
+    with pytest.raises(ConfigError, match="needs the robot's model file"):
+        make_gym_env(compose_config(["env=mjcf"]).env)
 
 
 @pytest.mark.parametrize("content, message", [
@@ -90,7 +95,7 @@ def test_init_from_transfers_weights_stats_and_optimizer(tiny_cfg, tmp_path):
     assert target.optimizer.state_dict()["state"], "optimizer moments were not loaded"
     assert target.frames == 0  # a new run: counters start fresh
     summary = target.train()
-    assert summary["env"] == "Ant-v5:quadruped_step.xml" and "success_rate" in summary
+    assert summary["env"] == "mjcf:quadruped_step.xml" and "success_rate" in summary
 
 
 def test_init_from_refuses_what_does_not_fit(tiny_cfg, tmp_path):
