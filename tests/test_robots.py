@@ -81,6 +81,7 @@ def test_step_env_has_a_15cm_step_ahead(tiny_cfg):
     step = model.geom("step")
     top, edge = model.geom_pos[step.id][2] + model.geom_size[step.id][2], model.geom_pos[step.id][0] - model.geom_size[step.id][0]
     assert top == pytest.approx(0.15) and 1.0 < edge < 4.0
+    assert model.geom_size[step.id][1] >= 40  # too wide to walk around in an episode
 
 
 def test_init_from_transfers_weights_stats_and_optimizer(tiny_cfg, tmp_path):
