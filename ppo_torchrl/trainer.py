@@ -208,9 +208,7 @@ class Trainer:
 
     def _restore(self, state: dict) -> None:
         """Continue from a checkpoint: weights, optimizer, stats, envs, counters and RNG streams."""
-        check_spec(state, self.spec, self.cfg.env.id)
-        self.ac.actor.load_state_dict(state["actor"])
-        self.ac.critic.load_state_dict(state["critic"])
+        self._load_networks(state, f"resume={self.run_dir}")
         self.loss_module.load_state_dict(state.get("loss_module", {}), strict=False)
         self.optimizer.load_state_dict(state["optimizer"])
         self.collector.load_state_dict(state["normalization"])
@@ -224,6 +222,18 @@ class Trainer:
         np.random.set_state(rng["numpy"])
         random.setstate(rng["python"])
 
+    def _load_networks(self, state: dict, source: str) -> None:
+        """Actor and critic weights of a checkpoint; sizes that do not fit are a one-line error."""
+        check_spec(state, self.spec, self.cfg.env.id)
+        try:
+            self.ac.actor.load_state_dict(state["actor"])
+            self.ac.critic.load_state_dict(state["critic"])
+        except RuntimeError as exc:
+            detail = next((l.strip() for l in str(exc).splitlines() if "size mismatch" in l or "Missing" in l
+                           or "Unexpected" in l), str(exc).splitlines()[0])
+            raise ConfigError(f"{source}: its networks do not fit this run's policy config "
+                              f"({detail.rstrip('.')}); use the same policy.* settings as that run") from None
+
     def _init_from(self, source: str, with_optimizer: bool) -> None:
         """Transfer: weights and normalization stats (and optimizer state) of another run; counters,
         envs and RNG streams start fresh. A run dir gives its best checkpoint."""
@@ -233,15 +243,7 @@ class Trainer:
         if not path.is_file():
             raise ConfigError(f"init_from={source}: no such run dir or checkpoint file")
         state = checkpoint.load(path)
-        check_spec(state, self.spec, self.cfg.env.id)
-        try:
-            self.ac.actor.load_state_dict(state["actor"])
-            self.ac.critic.load_state_dict(state["critic"])
-        except RuntimeError as exc:
-            detail = next((l.strip() for l in str(exc).splitlines() if "size mismatch" in l or "Missing" in l
-                           or "Unexpected" in l), str(exc).splitlines()[0])
-            raise ConfigError(f"init_from={source}: its networks do not fit this run's policy config "
-                              f"({detail.rstrip('.')}); use the same policy.* settings as that run") from None
+        self._load_networks(state, f"init_from={source}")
         if with_optimizer:
             self.optimizer.load_state_dict(state["optimizer"])
         norm = state["normalization"]
