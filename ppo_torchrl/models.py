@@ -24,6 +24,9 @@ from ppo_torchrl.envs import EnvSpec
 from ppo_torchrl.errors import ConfigError
 
 ACTIVATIONS = {"tanh": nn.Tanh, "relu": nn.ReLU, "elu": nn.ELU}
+# The same activations in numpy, for NumpyPolicy.
+NUMPY_ACTIVATIONS = {nn.Tanh: np.tanh, nn.ReLU: lambda x: np.maximum(x, 0),
+                     nn.ELU: lambda x: np.where(x > 0, x, np.expm1(x))}
 HEADS = ("tanh_normal", "normal")
 STD_MODES = ("state_independent", "state_dependent")
 
@@ -155,6 +158,7 @@ class NumpyPolicy:
 
     def __init__(self, ac: ActorCritic):
         self.ac = ac
+        self.squash = ac.head == "tanh_normal"
         self.low = ac.action_low.cpu().numpy()
         self.high = ac.action_high.cpu().numpy()
         self.mid, self.half = (self.high + self.low) / 2, (self.high - self.low) / 2
@@ -168,43 +172,39 @@ class NumpyPolicy:
         return [module]
 
     def sync(self) -> None:
-        """Copy the current weights of the policy net."""
+        """Copy the current weights of the policy net (one numpy function per layer)."""
         def linear(layer: nn.Linear):
-            return layer.weight.detach().cpu().numpy().T.copy(), layer.bias.detach().cpu().numpy().copy()
+            w, b = layer.weight.detach().cpu().numpy().T.copy(), layer.bias.detach().cpu().numpy().copy()
+            return lambda x: x @ w + b
 
         self.layers = []
         for module in self._flatten(self.ac.policy_net):
             if isinstance(module, nn.Linear):
-                self.layers.append(("linear", linear(module)))
-            elif isinstance(module, (nn.Tanh, nn.ReLU, nn.ELU)):
-                self.layers.append((type(module).__name__, None))
+                self.layers.append(linear(module))
+            elif type(module) in NUMPY_ACTIVATIONS:
+                self.layers.append(NUMPY_ACTIVATIONS[type(module)])
             elif isinstance(module, GaussianParams):
-                scale = linear(module.scale) if module.state_dependent else module.log_std.detach().exp().cpu().numpy()
-                self.head = (linear(module.loc), module.state_dependent, scale, module.std_min)
+                self.loc_head = linear(module.loc)
+                if module.state_dependent:
+                    scale_head, std_min = linear(module.scale), module.std_min
+                    self.scale_head = lambda x: np.logaddexp(0, scale_head(x)) + std_min
+                else:  # the same std for every observation: computed once here
+                    scale = module.log_std.detach().exp().cpu().numpy() + module.std_min
+                    self.scale_head = lambda x: scale
             else:
                 raise TypeError(f"NumpyPolicy cannot run a {type(module).__name__} layer")
 
     def loc_scale(self, obs: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
         x = obs
-        for kind, params in self.layers:
-            if kind == "linear":
-                x = x @ params[0] + params[1]
-            elif kind == "Tanh":
-                x = np.tanh(x)
-            elif kind == "ReLU":
-                x = np.maximum(x, 0)
-            else:  # ELU
-                x = np.where(x > 0, x, np.expm1(x))
-        (w, b), state_dependent, scale, std_min = self.head
-        loc = x @ w + b
-        scale = np.logaddexp(0, x @ scale[0] + scale[1]) if state_dependent else scale
-        return loc, scale + std_min if std_min > 0 else scale
+        for layer in self.layers:
+            x = layer(x)
+        return self.loc_head(x), self.scale_head(x)
 
     def act(self, obs: np.ndarray, noise: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
         """(action to store, action to send to the env) for observations [n, obs_dim]."""
         loc, scale = self.loc_scale(obs)
         base = (loc + scale * noise).astype(np.float32)
-        if self.ac.head == "tanh_normal":
+        if self.squash:
             action = self.mid + self.half * np.clip(np.tanh(base), -self.tanh_limit, self.tanh_limit)
             return action, action
         return base, np.minimum(np.maximum(base, self.low), self.high)
