@@ -9,8 +9,8 @@ from conftest import compose_config
 
 
 def test_defaults_reproduce_the_cleanrl_mujoco_settings():
-    cfg = compose_config(["env=Walker2d-v4"])  # an env file without tuned values
-    assert cfg.env.id == "Walker2d-v4"
+    cfg = compose_config(["env=Walker2d-v5"])  # an env file without tuned values
+    assert cfg.env.id == "Walker2d-v5"
     assert (cfg.collector.frames_per_batch, cfg.collector.total_frames, cfg.collector.num_envs) == (2048, 1_000_000, 1)
     assert (cfg.loss.name, cfg.loss.epochs, cfg.loss.minibatch_size) == ("clip_ppo", 10, 64)
     assert cfg.collector.frames_per_batch // cfg.loss.minibatch_size == 32
@@ -18,6 +18,7 @@ def test_defaults_reproduce_the_cleanrl_mujoco_settings():
     assert (cfg.advantage.gamma, cfg.advantage.lmbda) == (0.99, 0.95)
     assert (cfg.optim.lr, cfg.optim.eps, cfg.optim.max_grad_norm, cfg.optim.anneal_lr) == (3e-4, 1e-5, 0.5, True)
     assert list(cfg.policy.hidden_sizes) == [64, 64] and cfg.policy.activation == "tanh"
+    assert (cfg.policy.width, cfg.policy.log_std_init, cfg.policy.ortho_init) == (None, 0.0, True)
     assert (cfg.policy.policy_head_gain, cfg.policy.value_head_gain) == (0.01, 1.0)
     assert (cfg.env.transforms.obs_norm, cfg.env.transforms.reward_norm) == ("running", "return")
     assert (cfg.env.transforms.obs_clip, cfg.env.transforms.reward_clip) == (10.0, 10.0)
@@ -30,11 +31,23 @@ def test_every_env_file_composes(env, version):
     assert compose_config([f"env={env}-{version}"]).env.id == f"{env}-{version}"
 
 
-def test_hopper_file_carries_the_tuned_values_and_presets_keep_their_own():
+def test_env_files_carry_their_tuned_values():
     hopper = compose_config(["env=Hopper-v4"])
     assert (hopper.advantage.gamma, hopper.policy.width, hopper.loss.clip_epsilon, hopper.optim.lr) == (0.995, 128, 0.1, 1e-4)
-    arena = compose_config(["experiment=arena_hopper"])
-    assert (arena.advantage.gamma, arena.policy.width, arena.loss.clip_epsilon, arena.optim.lr) == (0.99, None, 0.2, 3e-4)
+    cheetah = compose_config(["env=HalfCheetah-v4"])
+    assert (cheetah.policy.log_std_init, cheetah.policy.width, cheetah.policy.activation) == (-2.0, 256, "relu")
+    assert (cheetah.collector.frames_per_batch, cheetah.loss.epochs, cheetah.optim.anneal_lr) == (512, 20, False)
+
+
+@pytest.mark.parametrize("preset", ["arena_hopper", "practical_rl_halfcheetah", "aidl_halfcheetah"])
+def test_presets_keep_their_own_values_over_tuned_env_files(preset):
+    cfg = compose_config([f"experiment={preset}"])
+    assert (cfg.policy.width, cfg.policy.activation, cfg.policy.ortho_init, cfg.policy.log_std_init) == (None, "tanh", True, 0.0)
+    assert (cfg.advantage.gamma, cfg.advantage.lmbda) == (0.99, 0.95)
+    assert cfg.optim.lr in (3e-4, 1e-4) and cfg.loss.clip_epsilon in (0.2, 0.1)
+    if preset != "aidl_halfcheetah":  # the project's values: shared trunk, 45 epochs, constant lr
+        assert (cfg.collector.frames_per_batch, cfg.loss.epochs, cfg.loss.minibatch_size) == (2048, 10, 64)
+        assert (cfg.optim.lr, cfg.optim.anneal_lr, cfg.loss.clip_epsilon, cfg.loss.entropy_coef) == (3e-4, True, 0.2, 0.0)
 
 
 def test_group_swaps_by_name():
