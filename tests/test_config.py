@@ -39,15 +39,21 @@ def test_env_files_carry_their_tuned_values():
     assert (cheetah.collector.frames_per_batch, cheetah.loss.epochs, cheetah.optim.anneal_lr) == (512, 20, False)
 
 
-@pytest.mark.parametrize("preset", ["arena_hopper", "practical_rl_halfcheetah", "aidl_halfcheetah"])
+# (frames_per_batch, epochs, minibatch_size, lr, anneal_lr, clip, entropy_coef) of each source document
+PRESET_LOOP_VALUES = {
+    "arena_hopper": (2048, 10, 64, 3e-4, True, 0.2, 0.0),
+    "practical_rl_halfcheetah": (2048, 10, 64, 3e-4, True, 0.2, 0.0),
+    "aidl_halfcheetah": (640, 45, 128, 1e-4, False, 0.1, 0.01),
+}
+
+
+@pytest.mark.parametrize("preset", sorted(PRESET_LOOP_VALUES))
 def test_presets_keep_their_own_values_over_tuned_env_files(preset):
     cfg = compose_config([f"experiment={preset}"])
     assert (cfg.policy.width, cfg.policy.activation, cfg.policy.ortho_init, cfg.policy.log_std_init) == (None, "tanh", True, 0.0)
     assert (cfg.advantage.gamma, cfg.advantage.lmbda) == (0.99, 0.95)
-    assert cfg.optim.lr in (3e-4, 1e-4) and cfg.loss.clip_epsilon in (0.2, 0.1)
-    if preset != "aidl_halfcheetah":  # the project's values: shared trunk, 45 epochs, constant lr
-        assert (cfg.collector.frames_per_batch, cfg.loss.epochs, cfg.loss.minibatch_size) == (2048, 10, 64)
-        assert (cfg.optim.lr, cfg.optim.anneal_lr, cfg.loss.clip_epsilon, cfg.loss.entropy_coef) == (3e-4, True, 0.2, 0.0)
+    assert (cfg.collector.frames_per_batch, cfg.loss.epochs, cfg.loss.minibatch_size, cfg.optim.lr, cfg.optim.anneal_lr,
+            cfg.loss.clip_epsilon, cfg.loss.entropy_coef) == PRESET_LOOP_VALUES[preset]
 
 
 def test_group_swaps_by_name():
