@@ -13,4 +13,11 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 if "pandas" not in sys.modules and importlib.util.find_spec("pandas") is None:
     sys.modules["pandas"] = None
 
+# `python -m ppo_torchrl[.evaluate|.export|.report]` imports this package first, while argv[0] is
+# still "-m": a Ctrl-C during the heavy imports that follow is one line, not a traceback.
+if sys.argv[:1] == ["-m"]:
+    from ppo_torchrl.signals import install_for_startup
+
+    install_for_startup()
+
 __version__ = "0.1.0"

@@ -3,91 +3,194 @@
 `resume=<run dir> [collector.total_frames=N]` continues a run in its own directory. Returns the
 final deterministic eval return (falling back to the last-100 training return), the value a Hydra
 sweeper such as Optuna maximizes.
+
+Before Hydra starts (and writes its `.hydra/` files), the command is checked whole: the config is
+composed and every value validated (each job of a sweep too), and the run or sweep dir is claimed
+(rundir.py). A refused command exits 2 with one line and leaves every file as it was.
 """
 
 from __future__ import annotations
 
+import itertools
 import sys
 from pathlib import Path
 
-import hydra
-from hydra.core.hydra_config import HydraConfig
-from omegaconf import DictConfig
+from ppo_torchrl import signals
+from ppo_torchrl.errors import ConfigError, guarded
 
-from ppo_torchrl.config import resume_config
-from ppo_torchrl.envs import check_env_id, env_files
-from ppo_torchrl.errors import ConfigError, Interrupted, TrainingError, report_and_exit
+if __name__ == "__main__":
+    signals.install()  # from here on a Ctrl-C or SIGTERM is one line and exit 130 / 143, imports included
 
 CONF_DIR = str(Path(__file__).resolve().parent.parent / "conf")
-HYDRA_FLAGS_WITHOUT_RUN = ("--cfg", "-c", "--help", "-h", "--hydra-help", "--info", "-i", "--version",
-                           "--shell-completion", "-sc", "--resolve", "-p", "--package")
+# Hydra flags that print or inspect instead of running a job; those marked take a value.
+HELP_FLAGS = ("--help", "-h", "--hydra-help", "--version", "--shell-completion", "-sc")
+INFO_FLAGS = ("--cfg", "-c", "--info", "-i", "--resolve")
+VALUE_FLAGS = ("--cfg", "-c", "--package", "-p", "--config-path", "-cp", "--config-name", "-cn",
+               "--config-dir", "-cd", "--experimental-rerun")
+INFO_VALUES = ("all", "config", "defaults", "defaults-tree", "plugins", "searchpath")
+MAX_VALIDATED_JOBS = 64  # a larger sweep has its first 64 jobs checked up front
 
 
-@hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")
-def main(cfg: DictConfig) -> float:
-    from ppo_torchrl import checkpoint
-    from ppo_torchrl.trainer import train
-
-    try:
-        state = None
-        if cfg.resume:
-            run_dir = Path(cfg.resume)
-            user = [o for o in HydraConfig.get().overrides.task if not o.startswith("resume=")]
-            cfg = resume_config(run_dir, user)
-            state = checkpoint.load(run_dir / "checkpoints" / checkpoint.LAST)
-        else:
-            run_dir = Path(HydraConfig.get().runtime.output_dir)
-        check_env_id(cfg.env.id)
-        summary = train(cfg, run_dir, state)
-    except (ConfigError, TrainingError, Interrupted) as error:
-        report_and_exit(error)
+def main(cfg) -> float:
+    """The Hydra task function: one training run in its (already claimed) run dir."""
+    summary = guarded(_run_job, cfg)
     for key in ("eval_return_mean", "train_return_last100"):
         if summary.get(key) is not None:
             return float(summary[key])
     return float("-inf")
 
 
-def check_env_override(args: list[str]) -> None:
+def _run_job(cfg) -> dict:
+    from hydra.core.hydra_config import HydraConfig
+
+    from ppo_torchrl import checkpoint, rundir
+    from ppo_torchrl.config import resume_config
+    from ppo_torchrl.trainer import train
+
+    state = None
+    if cfg.resume:
+        run_dir = Path(cfg.resume)
+        user = [o for o in HydraConfig.get().overrides.task if not o.startswith("resume=")]
+        cfg = resume_config(run_dir, user)
+        state = checkpoint.load(run_dir / "checkpoints" / checkpoint.LAST)
+    else:
+        run_dir = Path(HydraConfig.get().runtime.output_dir)
+    # A single run's dir was claimed before Hydra started; a sweep's jobs claim theirs here.
+    rundir.claim(run_dir, resume=bool(cfg.resume))
+    return train(cfg, run_dir, state)
+
+
+def split_args(argv: list[str]) -> tuple[list[str], list[str]]:
+    """(Hydra flags with their values, key=value overrides)."""
+    flags, overrides, i = [], [], 0
+    while i < len(argv):
+        arg, following = argv[i], argv[i + 1] if i + 1 < len(argv) else None
+        takes_value = arg in VALUE_FLAGS or (arg in ("--info", "-i") and following in INFO_VALUES)
+        if arg.startswith("-"):
+            flags += [arg, following] if takes_value else [arg]
+        else:
+            overrides.append(arg)
+        i += 2 if arg.startswith("-") and takes_value else 1
+    return flags, overrides
+
+
+def check_env_override(overrides: list[str]) -> None:
     """`env=<name>` must name a file in conf/env; say which exist and how to use any other id."""
-    for arg in args:
-        if arg.startswith("env=") and "," not in arg:
-            name = arg.split("=", 1)[1]
+    from ppo_torchrl.envs import env_files
+
+    for arg in overrides:
+        if arg.startswith("env="):
             available = env_files()
-            if name not in available:
-                shown = ", ".join(n for n in available if n != "gym")
-                raise ConfigError(
-                    f"env={name} has no config file. Available: {shown}. "
-                    f"For any other registered Gymnasium id use: env=gym env.id={name}"
-                )
+            for name in arg.split("=", 1)[1].split(","):
+                if name not in available:
+                    shown = ", ".join(n for n in available if n != "gym")
+                    raise ConfigError(
+                        f"env={name} has no config file. Available: {shown}. "
+                        f"For any other registered Gymnasium id use: env=gym env.id={name}"
+                    )
 
 
-def check_resume(args: list[str]) -> list[str]:
-    """`resume=<dir>` must be a run dir with a checkpoint; the job then runs in that dir."""
-    for arg in args:
-        if arg.startswith("resume="):
-            run_dir = Path(arg.split("=", 1)[1]).expanduser()
-            if not run_dir.is_dir():
-                raise ConfigError(f"resume={run_dir}: no such directory; give the run dir of an earlier run")
-            if not (run_dir / "config.yaml").is_file() or not (run_dir / "checkpoints" / "last.pt").is_file():
-                raise ConfigError(f"resume={run_dir} is not a ppo_torchrl run dir: it needs config.yaml and "
-                                  "checkpoints/last.pt")
-            # Keep the run's own .hydra/ as it was: the saved config is the one that resumes.
-            return [f"hydra.run.dir={run_dir}", "hydra.output_subdir=null"]
-    return []
+def check_resume(resume: str, overrides: list[str]) -> Path:
+    """`resume=<dir>` must be a run dir with a checkpoint that has frames left to train."""
+    from ppo_torchrl import checkpoint
+    from ppo_torchrl.config import resume_config
+    from ppo_torchrl.validation import validate_config
+
+    run_dir = Path(resume).expanduser()
+    if not run_dir.is_dir():
+        raise ConfigError(f"resume={run_dir}: no such directory; give the run dir of an earlier run")
+    if not (run_dir / "config.yaml").is_file() or not (run_dir / "checkpoints" / "last.pt").is_file():
+        raise ConfigError(f"resume={run_dir} is not a ppo_torchrl run dir with a checkpoint: it needs config.yaml "
+                          "and checkpoints/last.pt")
+    cfg = resume_config(run_dir, [o for o in overrides if not o.startswith("resume=")])
+    validate_config(cfg)
+    frames = checkpoint.load(run_dir / "checkpoints" / checkpoint.LAST)["frames"]
+    if frames >= cfg.collector.total_frames:
+        raise ConfigError(f"resume={run_dir}: the run has done {frames} frames already, collector.total_frames="
+                          f"{cfg.collector.total_frames} leaves nothing to do; give a larger collector.total_frames")
+    return run_dir
 
 
-def check_composes(args: list[str]) -> None:
-    """Compose the config as Hydra will, so a bad override is one line, not Hydra's report."""
-    from hydra import compose, initialize_config_dir
+def compose(overrides: list[str], with_hydra: bool = False):
+    """The config as Hydra will compose it; a bad override is one line, not Hydra's report."""
+    from hydra import compose as hydra_compose
+    from hydra import initialize_config_dir
     from hydra.errors import HydraException
     from omegaconf.errors import OmegaConfBaseException
 
-    overrides = [a for a in args if not a.startswith(("-", "hydra.", "hydra/", "+hydra", "~hydra"))]
+    import ppo_torchrl.config  # noqa: F401  (registers the schemas)
+
+    if not with_hydra:
+        overrides = [a for a in overrides if not a.lstrip("+~").startswith(("hydra.", "hydra/"))]
     try:
         with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
-            compose(config_name="config", overrides=overrides)
+            return hydra_compose(config_name="config", overrides=overrides, return_hydra_config=with_hydra)
     except (HydraException, OmegaConfBaseException) as exc:
         raise ConfigError(one_line(exc)) from exc
+
+
+def sweep_jobs(overrides: list[str]) -> list[list[str]]:
+    """The override lists of a sweep's jobs (discrete sweeps expanded; an interval is left to the sweeper)."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+    from hydra.errors import HydraException
+
+    try:
+        parsed = OverridesParser.create().parse_overrides(overrides)
+    except HydraException as exc:
+        raise ConfigError(one_line(exc)) from exc
+    axes = []
+    for arg, override in zip(overrides, parsed):
+        if override.is_hydra_override():
+            continue
+        if not override.is_sweep_override():
+            axes.append([arg])
+        elif override.is_discrete_sweep():
+            key = override.get_key_element()
+            axes.append([f"{key}={value}" for value in override.sweep_string_iterator()])
+    return [list(job) for job in itertools.islice(itertools.product(*axes), MAX_VALIDATED_JOBS)]
+
+
+def quoted(path: Path) -> str:
+    return "'" + str(path).replace("\\", "\\\\").replace("'", "\\'") + "'"
+
+
+def with_override(argv: list[str], key: str, value: str) -> list[str]:
+    return [a for a in argv if not a.startswith(f"{key}=")] + [f"{key}={value}"]
+
+
+def prepare(argv: list[str]) -> list[str]:
+    """Check the whole command and claim its dir; returns the argv Hydra runs with."""
+    from ppo_torchrl import rundir
+    from ppo_torchrl.validation import validate_config
+
+    flags, overrides = split_args(argv)
+    if any(f in HELP_FLAGS for f in flags):
+        return argv
+    check_env_override(overrides)
+    multirun = "-m" in flags or "--multirun" in flags
+    resume = next((o.split("=", 1)[1] for o in overrides if o.startswith("resume=")), None)
+    if any(f in INFO_FLAGS for f in flags):  # print or inspect: check the config, write nothing
+        for job in sweep_jobs(overrides) if multirun else [overrides]:
+            compose(job)
+        return argv
+    if resume and not multirun:
+        run_dir = check_resume(resume, overrides)
+        rundir.claim(run_dir, resume=True)
+        # Keep the run's own .hydra/ as it was: the saved config is the one that resumes.
+        return argv + [f"hydra.run.dir={quoted(run_dir)}", "hydra.output_subdir=null"]
+    for job in sweep_jobs(overrides) if multirun else [overrides]:
+        validate_config(compose(job))
+    hydra_cfg = compose(overrides if not multirun else sweep_jobs(overrides)[0] + [
+        o for o in overrides if o.lstrip("+~").startswith(("hydra.", "hydra/"))], with_hydra=True)
+    overwrite = bool(hydra_cfg.get("overwrite", False))
+    if multirun:
+        sweep_dir = Path(hydra_cfg.hydra.sweep.dir)
+        rundir.claim(sweep_dir, overwrite=overwrite, what="sweep")
+        return with_override(argv, "hydra.sweep.dir", quoted(sweep_dir))
+    run_dir = Path(hydra_cfg.hydra.run.dir)
+    rundir.claim(run_dir, overwrite=overwrite)
+    signals.ON_DISK.run_dir = run_dir
+    return with_override(argv, "hydra.run.dir", quoted(run_dir))
 
 
 def one_line(exc: BaseException) -> str:
@@ -112,14 +215,12 @@ def one_line(exc: BaseException) -> str:
     return message
 
 
+def cli() -> None:
+    import hydra
+
+    sys.argv = [sys.argv[0]] + prepare(sys.argv[1:])
+    hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")(main)()
+
+
 if __name__ == "__main__":
-    argv = sys.argv[1:]
-    multirun = "-m" in argv or "--multirun" in argv
-    try:
-        check_env_override(argv)
-        sys.argv += check_resume(argv)
-        if not multirun and not any(a.split("=")[0] in HYDRA_FLAGS_WITHOUT_RUN for a in argv):
-            check_composes(argv)
-    except ConfigError as err:
-        report_and_exit(err)
-    main()
+    guarded(cli)

@@ -72,13 +72,29 @@ class CheckpointManager:
     def save(self, state: dict, eval_return: Optional[float] = None) -> Path:
         save(self.dir / LAST, state)
         if self.keep_last > 0:
-            save(self.dir / f"frames_{state['frames']:010d}.pt", state)
-            for old in sorted(self.dir.glob("frames_*.pt"))[: -self.keep_last]:
-                old.unlink()
+            frames = state["frames"]
+            save(self.dir / f"frames_{frames:010d}.pt", state)
+            # By frame count: keep the newest keep_last up to now; any beyond now is not this run's past.
+            saved = sorted((int(p.stem.split("_")[1]), p) for p in self.dir.glob("frames_*.pt")
+                           if p.stem.split("_")[1].isdigit())
+            kept = [f for f, _ in saved if f <= frames][-self.keep_last:]
+            for old_frames, old in saved:
+                if old_frames not in kept:
+                    old.unlink()
         if self.save_best and eval_return is not None and (self.best_return is None or eval_return > self.best_return):
             self.best_return = eval_return
             save(self.dir / BEST, state)
         return self.dir / LAST
+
+
+def check_spec(state: dict, spec, env_id: str) -> None:
+    """A checkpoint fits an env when its observation and action sizes are the env's."""
+    saved = state.get("spec", {})
+    if (saved.get("obs_dim"), saved.get("action_dim")) != (spec.obs_dim, spec.action_dim):
+        raise ConfigError(
+            f"the checkpoint was made for observations of size {saved.get('obs_dim')} and actions of size "
+            f"{saved.get('action_dim')}, but {env_id} has {spec.obs_dim} and {spec.action_dim}"
+        )
 
 
 def resolve_checkpoint(run_dir: Path, which: str) -> Path:
@@ -102,7 +118,6 @@ def load_policy(run_dir: Path, which: str = "best"):
     from ppo_torchrl.config import Config
     from ppo_torchrl.envs import env_spec
     from ppo_torchrl.models import make_actor_critic
-    from ppo_torchrl.trainer import check_spec
 
     path = resolve_checkpoint(run_dir, which)
     state = load(path)

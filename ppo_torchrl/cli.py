@@ -35,12 +35,11 @@ def parse_args(argv: list[str], spec: Dict[str, Any], usage: str) -> Dict[str, A
 
 
 def run(main) -> None:
-    """Run an entry point's main(argv); bad input becomes one line and exit 2."""
+    """Run an entry point's main(argv) through the one error path (errors.py), signals included."""
     import sys
 
-    from ppo_torchrl.errors import report_and_exit
+    from ppo_torchrl import signals
+    from ppo_torchrl.errors import guarded
 
-    try:
-        main(sys.argv[1:])
-    except ConfigError as error:
-        report_and_exit(error)
+    signals.install()
+    guarded(main, sys.argv[1:])

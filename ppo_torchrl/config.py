@@ -181,6 +181,9 @@ class Config:
     # the one-off compile (~12 s, ~2 s once cached) is repaid: the update runs ~1.6x faster.
     compile: str = "auto"
     resume: Optional[str] = None  # a run dir: continue it from checkpoints/last.pt
+    # A new run refuses a dir that holds another run (hydra.run.dir / hydra.sweep.dir given twice);
+    # overwrite=true removes that run's files first. A dir in use by a running process is always refused.
+    overwrite: bool = False
     # Transfer: start a new run from another run's weights and normalization stats (its best.pt, or
     # a checkpoint file); init_from_optimizer also takes its optimizer state.
     init_from: Optional[str] = None

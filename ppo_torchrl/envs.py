@@ -89,10 +89,17 @@ def resolve_model_file(xml_file: str) -> Path:
     raise ConfigError(f"env.xml_file={xml_file}: no such file (a path, or a shipped model: {shipped})")
 
 
+@dataclass(frozen=True)
+class MjcfInfo:
+    cameras: tuple  # camera names
+    bodies: tuple  # body names, by id
+    ctrl_from_force: tuple  # (actuator id, low, high): no ctrlrange, control bounds from its forcerange
+
+
 @functools.lru_cache(maxsize=None)
-def check_mjcf(path: Path) -> tuple:
-    """The model must compile in MuJoCo, have a free-floating base and at least one actuator.
-    Returns the model's camera names."""
+def check_mjcf(path: Path) -> MjcfInfo:
+    """The model must compile in MuJoCo, have a free-floating base and at least one actuator, each
+    actuator with control bounds: its ctrlrange or, without one, its forcerange / gear."""
     import mujoco
 
     try:
@@ -105,7 +112,19 @@ def check_mjcf(path: Path) -> tuple:
                           "(add <freejoint/> to the robot's root body)")
     if model.nu == 0:
         raise ConfigError(f"env.xml_file={path} has no actuators: there is nothing for the policy to control")
-    return tuple(model.camera(i).name for i in range(model.ncam))
+    from_force = []
+    for i in range(model.nu):
+        low, high = model.actuator_ctrlrange[i]
+        if model.actuator_ctrllimited[i] and low < high:
+            continue
+        gear = float(model.actuator_gear[i][0]) or 1.0
+        if not (model.actuator_forcelimited[i] and model.actuator_forcerange[i][0] < model.actuator_forcerange[i][1]):
+            raise ConfigError(f"env.xml_file={path}: actuator '{model.actuator(i).name or i}' has no ctrlrange (nor "
+                              "forcerange), so its action bounds would be [0, 0]; give it ctrlrange=\"low high\"")
+        bounds = sorted(float(f) / gear for f in model.actuator_forcerange[i])
+        from_force.append((i, bounds[0], bounds[1]))
+    return MjcfInfo(cameras=tuple(model.camera(i).name for i in range(model.ncam)),
+                    bodies=tuple(model.body(i).name for i in range(model.nbody)), ctrl_from_force=tuple(from_force))
 
 
 def mjcf_kwargs(env_cfg) -> dict:
@@ -113,13 +132,17 @@ def mjcf_kwargs(env_cfg) -> dict:
     if env_cfg.id not in (MJCF_ID, MJCF_ENV_ID):
         raise ConfigError(f"env.xml_file needs env=mjcf (or env.id={MJCF_ENV_ID}), not env.id={env_cfg.id}")
     path = resolve_model_file(env_cfg.xml_file)
-    cameras = check_mjcf(path)
+    info = check_mjcf(path)
     loco = env_cfg.locomotion
     low, high = loco.healthy_z_range
     if not low < high:
         raise ConfigError(f"env.locomotion.healthy_z_range={list(loco.healthy_z_range)} must be [low, high] with low < high")
     main_body = int(loco.main_body) if str(loco.main_body).isdigit() else str(loco.main_body)
-    kwargs = {"camera_name": TRACKING_CAMERA} if TRACKING_CAMERA in cameras else {}
+    if not (0 < main_body < len(info.bodies) if isinstance(main_body, int) else main_body in info.bodies):
+        named = ", ".join(b for b in info.bodies[1:6] if b)
+        raise ConfigError(f"env.locomotion.main_body={loco.main_body} is not a body of {path.name} "
+                          f"(a body name, e.g. {named}, or an id in 1..{len(info.bodies) - 1})")
+    kwargs = {"camera_name": TRACKING_CAMERA} if TRACKING_CAMERA in info.cameras else {}
     return {
         **kwargs,
         "xml_file": str(path),
@@ -153,7 +176,13 @@ def gym_make_kwargs(env_cfg, render_mode: Optional[str] = None, **render_kwargs)
 def make_gym_env(env_cfg, render_mode: Optional[str] = None, **render_kwargs) -> gym.Env:
     kwargs = gym_make_kwargs(env_cfg, render_mode, **render_kwargs)
     # The passive checker re-validates every step; the id is checked once above instead.
-    env = gym.make(MJCF_ENV_ID if env_cfg.id == MJCF_ID else env_cfg.id, disable_env_checker=True, **kwargs)
+    try:
+        env = gym.make(MJCF_ENV_ID if env_cfg.id == MJCF_ID else env_cfg.id, disable_env_checker=True, **kwargs)
+    except (gym.error.Error, ImportError, TypeError, ValueError) as exc:  # a missing extra, a bad make_kwargs
+        first = next((l.strip() for l in str(exc).splitlines() if l.strip()), "")
+        raise ConfigError(f"cannot make env '{env_cfg.id}': {type(exc).__name__}: {first}") from None
+    if env_cfg.get("xml_file"):
+        _ctrl_bounds_from_force(env, check_mjcf(resolve_model_file(env_cfg.xml_file)))
     if not isinstance(env.action_space, gym.spaces.Box):
         raise ConfigError(
             f"env '{env_cfg.id}' has a {type(env.action_space).__name__} action space; "
@@ -162,6 +191,17 @@ def make_gym_env(env_cfg, render_mode: Optional[str] = None, **render_kwargs) ->
     if len(env.observation_space.shape) != 1:
         raise ConfigError(f"env '{env_cfg.id}' has observations of shape {env.observation_space.shape}; a flat vector is required")
     return env
+
+
+def _ctrl_bounds_from_force(env: gym.Env, info: MjcfInfo) -> None:
+    """Actuators without a ctrlrange get forcerange / gear as control bounds (and the action space)."""
+    if not info.ctrl_from_force:
+        return
+    model = env.unwrapped.model
+    for i, low, high in info.ctrl_from_force:
+        model.actuator_ctrllimited[i] = 1
+        model.actuator_ctrlrange[i] = (low, high)
+    env.unwrapped._set_action_space()
 
 
 def env_spec(env_cfg) -> EnvSpec:

@@ -1,12 +1,25 @@
-"""Errors a user can act on, reported as one line and a non-zero exit instead of a traceback."""
+"""One error path for every entry point: one line on stderr and an exit code of the error's kind.
+
+| kind | exit | line |
+|---|---|---|
+| bad input (`ConfigError`): config, command line, run dir, checkpoint | 2 | `error: ...` |
+| training stopped itself (`TrainingError`: a non-finite loss, gradient or parameter) | 3 | `error: ...` |
+| SIGINT / SIGTERM (`Interrupted`, or a signal at any other moment) | 130 / 143 | `interrupted: ...` |
+| anything else: a bug | 1 | `error: internal error ...; please report it` + the traceback in a log file |
+
+`PPO_TORCHRL_DEBUG=1` also prints the traceback; the exit code stays the same.
+"""
 
 from __future__ import annotations
 
 import os
 import sys
+import tempfile
+import traceback
 
 EXIT_CONFIG = 2  # bad input: config, command line, run dir, checkpoint
 EXIT_TRAINING = 3  # training stopped itself (non-finite loss, gradient or parameter)
+EXIT_BUG = 1  # an internal error: please report
 EXIT_SIGNAL = {2: 130, 15: 143}  # interrupted: 128 + signal number, as shells report it
 
 
@@ -27,16 +40,60 @@ class Interrupted(Exception):
 
 
 def exit_code(error: BaseException) -> int:
+    if isinstance(error, (Interrupted, KeyboardInterrupt)):
+        signum = getattr(error, "signum", 2)
+        return EXIT_SIGNAL.get(signum, 128 + signum)
+    if isinstance(error, TrainingError):
+        return EXIT_TRAINING
+    return EXIT_CONFIG if isinstance(error, ConfigError) else EXIT_BUG
+
+
+def message_of(error: BaseException) -> str:
+    """The one line for an error (an internal one also gets its traceback written to a log)."""
+    from ppo_torchrl.signals import ON_DISK
+
+    if isinstance(error, KeyboardInterrupt):  # a signal outside the training loop
+        return f"interrupted: stopped at once; {ON_DISK.describe()}"
     if isinstance(error, Interrupted):
-        return EXIT_SIGNAL.get(error.signum, 128 + error.signum)
-    return EXIT_TRAINING if isinstance(error, TrainingError) else EXIT_CONFIG
+        return f"interrupted: {error}"
+    if isinstance(error, (ConfigError, TrainingError)):
+        return f"error: {error}"
+    log = write_traceback(error, ON_DISK.run_dir)
+    first = str(error).strip().splitlines()[0] if str(error).strip() else ""
+    return (f"error: internal error ({type(error).__name__}{': ' + first if first else ''}); please report it "
+            f"with the traceback in {log}")
+
+
+def write_traceback(error: BaseException, run_dir) -> str:
+    text = "".join(traceback.format_exception(type(error), error, error.__traceback__))
+    try:
+        if run_dir is not None and os.path.isdir(run_dir):
+            path = os.path.join(run_dir, "error.log")
+            with open(path, "a") as f:
+                f.write(text)
+            return path
+    except OSError:
+        pass
+    fd, path = tempfile.mkstemp(prefix="ppo_torchrl_error_", suffix=".log")
+    with os.fdopen(fd, "w") as f:
+        f.write(text)
+    return path
 
 
 def report_and_exit(error: BaseException) -> None:
-    """Print `error: <message>` on one line; PPO_TORCHRL_DEBUG=1 re-raises for the traceback."""
+    """Print the error's line (and with PPO_TORCHRL_DEBUG=1 its traceback), exit with its code."""
     if os.environ.get("PPO_TORCHRL_DEBUG"):
-        raise error
-    message = " ".join(str(error).split())  # one line, whatever the message held
-    prefix = "interrupted" if isinstance(error, Interrupted) else "error"
-    print(f"{prefix}: {message}", file=sys.stderr, flush=True)
+        traceback.print_exception(type(error), error, error.__traceback__, file=sys.stderr)
+    line = " ".join(message_of(error).split())  # one line, whatever the message held
+    print(line, file=sys.stderr, flush=True)
     sys.exit(exit_code(error))
+
+
+def guarded(function, *args):
+    """Run an entry point; whatever escapes it ends through `report_and_exit`."""
+    try:
+        return function(*args)
+    except SystemExit:
+        raise
+    except BaseException as error:  # noqa: BLE001 - the one place every error is reported
+        report_and_exit(error)

@@ -14,7 +14,6 @@ from tensordict import TensorDictBase
 
 from torchrl.objectives import A2CLoss, ClipPPOLoss, KLPENPPOLoss, LossModule, PPOLoss, ReinforceLoss
 
-from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.models import ActorCritic
 
 
@@ -76,10 +75,28 @@ LOSSES: Dict[str, Callable[[object, ActorCritic], LossModule]] = {
 NOT_COMPILABLE = {"kl_ppo": "its adaptive KL coefficient is updated in place inside the loss"}
 
 
+# The batch keys the losses read (KLPENPPOLoss also reads the old loc/scale; value clipping the old
+# state_value): the update indexes only these per minibatch.
+LOSS_INPUT_KEYS = ("observation", "action", "action_log_prob", "advantage", "value_target", "state_value",
+                   "loc", "scale")
+# TorchRL loss output key -> the metric name in metrics.csv
+LOSS_METRICS = {
+    "loss_objective": "loss/objective", "loss_actor": "loss/objective",
+    "loss_critic": "loss/critic", "loss_value": "loss/critic",
+    "loss_entropy": "loss/entropy",
+    "kl_approx": "train/approx_kl", "kl": "train/approx_kl", "clip_fraction": "train/clipfrac",
+}
+OPTIMIZERS = {"adam": torch.optim.Adam, "adamw": torch.optim.AdamW}
+
+
 def make_loss(cfg, ac: ActorCritic) -> LossModule:
-    if cfg.name not in LOSSES:
-        raise ConfigError(f"loss.name='{cfg.name}' is not a known loss; use one of {', '.join(LOSSES)}")
     return LOSSES[cfg.name](cfg, ac)
+
+
+def make_optimizer(cfg, params, device: torch.device) -> torch.optim.Optimizer:
+    """The `optim` group: Adam or AdamW (fused on CPU) over the loss module's trainable parameters."""
+    return OPTIMIZERS[cfg.name](params, lr=cfg.lr, eps=cfg.eps, weight_decay=cfg.weight_decay,
+                                **({"fused": True} if device.type == "cpu" else {}))
 
 
 def make_loss_step(loss_module: LossModule, normalize_advantage: bool) -> Callable:

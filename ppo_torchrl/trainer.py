@@ -8,9 +8,7 @@ from __future__ import annotations
 
 import math
 import random
-import signal
 import sys
-import threading
 import time
 from collections import deque
 from pathlib import Path
@@ -23,38 +21,17 @@ from tensordict import TensorDict
 
 from ppo_torchrl import checkpoint
 from ppo_torchrl.advantage import explained_variance, make_advantage
-from ppo_torchrl.checkpoint import CheckpointManager
+from ppo_torchrl.checkpoint import CheckpointManager, check_spec
 from ppo_torchrl.collector import make_collector
-from ppo_torchrl.envs import env_label, env_spec, seed_everything
+from ppo_torchrl.envs import env_label, seed_everything
 from ppo_torchrl.errors import ConfigError, Interrupted, TrainingError
 from ppo_torchrl.evaluate import evaluate_policy
-from ppo_torchrl.loggers import MetricsFile, Progress, close_logger, make_logger, truncate_logs
-from ppo_torchrl.losses import NOT_COMPILABLE, make_loss, make_loss_step
+from ppo_torchrl.loggers import COLUMNS, MetricsFile, Progress, close_logger, make_logger, truncate_logs
+from ppo_torchrl.losses import (LOSS_INPUT_KEYS, LOSS_METRICS, NOT_COMPILABLE, make_loss, make_loss_step,
+                                make_optimizer)
 from ppo_torchrl.models import make_actor_critic
-
-OPTIMIZERS = {"adam": torch.optim.Adam, "adamw": torch.optim.AdamW}
-OBS_NORMS = ("running", "fixed", "none")
-REWARD_NORMS = ("return", "scale", "none")
-CRITIC_LOSSES = ("l2", "l1", "smooth_l1")
-
-# metrics.csv columns, in order; a row leaves the ones it lacks empty.
-COLUMNS = [
-    "iteration", "frames", "time_s", "sps", "lr",
-    "train/episode_return", "train/episode_length", "train/return_last100", "train/episodes",
-    "eval/return_mean", "eval/return_std", "eval/length_mean", "eval/forward_velocity", "eval/success_rate",
-    "loss/objective", "loss/critic", "loss/entropy", "loss/total",
-    "train/entropy", "train/approx_kl", "train/clipfrac", "train/explained_variance", "train/grad_norm",
-    "policy/loc_mean", "policy/scale_mean", "train/value_mean", "train/advantage_std",
-]
-LOSS_INPUT_KEYS = ("observation", "action", "action_log_prob", "advantage", "value_target", "state_value",
-                   "loc", "scale")
-# TorchRL loss output key -> our metric name
-LOSS_METRICS = {
-    "loss_objective": "loss/objective", "loss_actor": "loss/objective",
-    "loss_critic": "loss/critic", "loss_value": "loss/critic",
-    "loss_entropy": "loss/entropy",
-    "kl_approx": "train/approx_kl", "kl": "train/approx_kl", "clip_fraction": "train/clipfrac",
-}
+from ppo_torchrl.signals import ON_DISK, Interrupt, StopRequest
+from ppo_torchrl.validation import resolve_device, validate_config
 
 
 def batch_entropy(dist) -> float:
@@ -65,17 +42,6 @@ def batch_entropy(dist) -> float:
         return -dist.log_prob(dist.sample()).mean().item()
 
 
-def resolve_device(name: str) -> torch.device:
-    if name == "auto":
-        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    if name not in ("cpu", "cuda") and not name.startswith("cuda:"):
-        raise ConfigError(f"device='{name}' is not allowed; use cpu, cuda or auto")
-    if name.startswith("cuda") and not torch.cuda.is_available():
-        raise ConfigError(f"device='{name}' was asked for but no CUDA device is available; use device=cpu or device=auto")
-    return torch.device(name)
-
-
-COMPILE_CHOICES = ("auto", "true", "false")
 COMPILE_AUTO_MIN_FRAMES = 150_000
 
 
@@ -85,106 +51,26 @@ def use_compile(cfg) -> bool:
                                 and cfg.loss.name not in NOT_COMPILABLE)
 
 
-def validate_config(cfg) -> None:
-    """Range and consistency checks that a type schema cannot express."""
-    _check_keys_against_schema(cfg)
-    c, loss, t = cfg.collector, cfg.loss, cfg.env.transforms
-    checks = [
-        (c.num_envs >= 1, f"collector.num_envs={c.num_envs} must be >= 1"),
-        (c.frames_per_batch >= 1, f"collector.frames_per_batch={c.frames_per_batch} must be >= 1"),
-        (c.frames_per_batch % c.num_envs == 0,
-         f"collector.frames_per_batch={c.frames_per_batch} must be divisible by collector.num_envs={c.num_envs}"),
-        (c.total_frames >= c.frames_per_batch,
-         f"collector.total_frames={c.total_frames} must be >= collector.frames_per_batch={c.frames_per_batch}"),
-        (str(cfg.compile).lower() in COMPILE_CHOICES,
-         f"compile={cfg.compile} is not allowed; use one of {', '.join(COMPILE_CHOICES)}"),
-        (not (str(cfg.compile).lower() == "true" and loss.name in NOT_COMPILABLE),
-         f"compile=true does not work with loss={loss.name}: {NOT_COMPILABLE.get(loss.name)}; use compile=auto or false"),
-        (cfg.optim.lr > 0, f"optim.lr={cfg.optim.lr} must be > 0"),
-        (cfg.optim.eps > 0, f"optim.eps={cfg.optim.eps} must be > 0"),
-        (cfg.optim.max_grad_norm is None or cfg.optim.max_grad_norm > 0,
-         f"optim.max_grad_norm={cfg.optim.max_grad_norm} must be > 0 (or null to disable)"),
-        (cfg.optim.name in OPTIMIZERS, f"optim.name='{cfg.optim.name}' is not known; use one of {', '.join(OPTIMIZERS)}"),
-        (loss.epochs >= 1, f"loss.epochs={loss.epochs} must be >= 1"),
-        (loss.minibatch_size is None or loss.minibatch_size >= 1, f"loss.minibatch_size={loss.minibatch_size} must be >= 1"),
-        (loss.minibatch_size is None or c.frames_per_batch % loss.minibatch_size == 0,
-         f"collector.frames_per_batch={c.frames_per_batch} is not divisible into minibatches of "
-         f"loss.minibatch_size={loss.minibatch_size}"),
-        (loss.clip_epsilon > 0, f"loss.clip_epsilon={loss.clip_epsilon} must be > 0"),
-        (loss.critic_loss in CRITIC_LOSSES, f"loss.critic_loss='{loss.critic_loss}' is not known; use one of {', '.join(CRITIC_LOSSES)}"),
-        (t.obs_norm in OBS_NORMS, f"env.transforms.obs_norm='{t.obs_norm}' is not known; use one of {', '.join(OBS_NORMS)}"),
-        (t.reward_norm in REWARD_NORMS, f"env.transforms.reward_norm='{t.reward_norm}' is not known; use one of {', '.join(REWARD_NORMS)}"),
-        (t.obs_norm_init_frames >= 2, f"env.transforms.obs_norm_init_frames={t.obs_norm_init_frames} must be >= 2"),
-        (cfg.eval.every_frames >= 0 and cfg.eval.episodes >= 1 and cfg.eval.final_episodes >= 0,
-         "eval.every_frames and eval.final_episodes must be >= 0 and eval.episodes >= 1"),
-        (cfg.checkpoint.every_frames >= 0 and cfg.checkpoint.keep_last >= 0,
-         "checkpoint.every_frames and checkpoint.keep_last must be >= 0"),
-        (cfg.torch_threads >= 1, f"torch_threads={cfg.torch_threads} must be >= 1"),
-    ]
-    for ok, message in checks:
-        if not ok:
-            raise ConfigError(message)
-
-
-def _check_keys_against_schema(cfg) -> None:
-    """`+group.key=v` can add a key the schema lacks; such a key would be silently ignored."""
-    from ppo_torchrl.config import Config
-
-    schema = OmegaConf.structured(Config)
-    data = OmegaConf.to_container(cfg, resolve=False)
-    data.pop("hydra", None)
-    try:
-        OmegaConf.merge(schema, data)
-    except Exception as exc:  # omegaconf's key/validation errors carry the full key
-        key = getattr(exc, "full_key", None) or ""
-        raise ConfigError(f"unknown or invalid config key '{key}': {str(exc).splitlines()[0]}") from exc
-
-
-class StopRequest:
-    """SIGINT/SIGTERM handlers: the first signal asks the loop to stop after the current iteration
-    (then it checkpoints); a second one abandons it at once, leaving the last checkpoint on disk."""
-
-    def __init__(self):
-        self.signum: Optional[int] = None
-        self._previous = {}
-
-    def __enter__(self) -> "StopRequest":
-        if threading.current_thread() is threading.main_thread():
-            for signum in (signal.SIGINT, signal.SIGTERM):
-                self._previous[signum] = signal.signal(signum, self._handle)
-        return self
-
-    def _handle(self, signum, frame) -> None:
-        if self.signum is not None:
-            raise KeyboardInterrupt
-        self.signum = signum
-        print(f"{signal.Signals(signum).name}: stopping after this iteration to save a checkpoint "
-              "(send it again to stop at once)", file=sys.stderr, flush=True)
-
-    def __exit__(self, *exc) -> None:
-        for signum, handler in self._previous.items():
-            signal.signal(signum, handler)
-
-
 class Trainer:
     def __init__(self, cfg, run_dir: Path, resume: Optional[dict] = None):
-        validate_config(cfg)
+        self.spec = validate_config(cfg)
+        if resume is not None and resume["frames"] >= cfg.collector.total_frames:
+            raise ConfigError(f"resume={run_dir}: the run has done {resume['frames']} frames already, "
+                              f"collector.total_frames={cfg.collector.total_frames} leaves nothing to do; "
+                              f"give a larger collector.total_frames")
         self.cfg = cfg
         self.run_dir = Path(run_dir)
         self.run_dir.mkdir(parents=True, exist_ok=True)
+        ON_DISK.__init__(run_dir=self.run_dir)  # what this run has saved: nothing yet
         torch.set_num_threads(cfg.torch_threads)
         self.device = resolve_device(cfg.device)
         seed_everything(cfg.seed)
 
-        self.spec = env_spec(cfg.env)
         self.ac = make_actor_critic(cfg.policy, self.spec, self.device)
         self.loss_module = make_loss(cfg.loss, self.ac)
         self.advantage = make_advantage(cfg.advantage, self.ac.critic)
         self.params = [p for p in self.loss_module.parameters() if p.requires_grad]
-        self.optimizer = OPTIMIZERS[cfg.optim.name](
-            self.params, lr=cfg.optim.lr, eps=cfg.optim.eps, weight_decay=cfg.optim.weight_decay,
-            **({"fused": True} if self.device.type == "cpu" else {}),
-        )
+        self.optimizer = make_optimizer(cfg.optim, self.params, self.device)
         self.loss_step = make_loss_step(self.loss_module, cfg.loss.normalize_advantage)
         if use_compile(cfg):
             self.loss_step = torch.compile(self.loss_step)
@@ -205,6 +91,7 @@ class Trainer:
             self._restore(resume)
         elif cfg.init_from:
             self._init_from(cfg.init_from, cfg.init_from_optimizer)
+        self._first_iteration = self.iteration
 
     def _restore(self, state: dict) -> None:
         """Continue from a checkpoint: weights, optimizer, stats, envs, counters and RNG streams."""
@@ -213,6 +100,8 @@ class Trainer:
         self.optimizer.load_state_dict(state["optimizer"])
         self.collector.load_state_dict(state["normalization"])
         self.frames, self.iteration = state["frames"], state["iteration"]
+        ON_DISK.checkpoint, ON_DISK.checkpoint_frames = self.ckpt.dir / checkpoint.LAST, self.frames
+        ON_DISK.frames = self.frames
         self.recent_returns.extend(state.get("recent_returns", []))
         self.last_eval = state.get("last_eval")
         self.ckpt.best_return = state.get("best_eval_return")
@@ -258,17 +147,17 @@ class Trainer:
         if self.resumed:
             truncate_logs(self.run_dir, self.frames)
         self.metrics = MetricsFile(self.run_dir / "metrics.csv", COLUMNS, append=self.resumed)
-        (self.run_dir / "config.yaml").write_text(OmegaConf.to_yaml(cfg, resolve=True))
+        if not self.resumed:  # a resume's overrides reach config.yaml once an iteration has completed
+            self.write_config()
         batch_frames = cfg.collector.frames_per_batch
         stop = StopRequest()
         self.progress = Progress(self.num_iterations * batch_frames, self.frames, cfg.logger.print_every_s)
         try:
             with stop:
                 self._loop(stop, batch_frames)
-        except KeyboardInterrupt:  # a second signal: the iteration in flight is abandoned
+        except Interrupt as signal_:  # a second signal: the iteration in flight is abandoned
             self.write_summary(status="interrupted")
-            raise Interrupted(f"stopped at once; the last checkpoint on disk is kept: {self.ckpt.dir / 'last.pt'} "
-                              f"(resume with: python -m ppo_torchrl resume={self.run_dir})", signal.SIGINT)
+            raise Interrupted(f"stopped at once; {ON_DISK.describe()}", signal_.signum) from None
         finally:
             self.progress.close()
             self.metrics.close()
@@ -287,6 +176,9 @@ class Trainer:
             self.frames += batch_frames
             self.iteration += 1
             self.train_time += time.perf_counter() - tick
+            ON_DISK.frames = self.frames
+            if self.resumed and self.iteration == self._first_iteration + 1:
+                self.write_config()
 
             last = self.iteration == self.num_iterations
             row = {"iteration": self.iteration, "frames": self.frames, "lr": lr, **update_stats}
@@ -370,8 +262,7 @@ class Trainer:
 
     def _non_finite(self, quantity: str, epoch: int, minibatch: Optional[int]) -> None:
         where = f"epoch {epoch + 1}" + (f", minibatch {minibatch + 1}" if minibatch is not None else "")
-        last = self.ckpt.dir / "last.pt"
-        kept = f"the last good checkpoint is {last}" if last.exists() else "no checkpoint had been written yet"
+        kept = f"the last good checkpoint is {ON_DISK.checkpoint}" if ON_DISK.checkpoint else "no checkpoint had been written yet"
         self.write_summary(status="failed")
         raise TrainingError(f"non-finite {quantity} at iteration {self.iteration + 1} (frames {self.frames}, {where}); "
                             f"training stopped and {kept}")
@@ -437,7 +328,13 @@ class Trainer:
         }
 
     def save_checkpoint(self, eval_return: Optional[float] = None) -> Path:
-        return self.ckpt.save(self.state_dict(), eval_return)
+        path = self.ckpt.save(self.state_dict(), eval_return)
+        ON_DISK.checkpoint, ON_DISK.checkpoint_frames = path, self.frames
+        return path
+
+    def write_config(self) -> None:
+        checkpoint.atomic_write_bytes(self.run_dir / "config.yaml",
+                                      lambda f: f.write(OmegaConf.to_yaml(self.cfg, resolve=True).encode()))
 
     def summary(self, status: str) -> dict:
         last_eval = self.last_eval or {}
@@ -463,15 +360,6 @@ class Trainer:
 
     def write_summary(self, status: str) -> None:
         checkpoint.atomic_write_json(self.run_dir / "summary.json", self.summary(status))
-
-
-def check_spec(state: dict, spec, env_id: str) -> None:
-    saved = state.get("spec", {})
-    if (saved.get("obs_dim"), saved.get("action_dim")) != (spec.obs_dim, spec.action_dim):
-        raise ConfigError(
-            f"the checkpoint was made for observations of size {saved.get('obs_dim')} and actions of size "
-            f"{saved.get('action_dim')}, but {env_id} has {spec.obs_dim} and {spec.action_dim}"
-        )
 
 
 def train(cfg, run_dir: Path, resume: Optional[dict] = None) -> dict:

@@ -3,7 +3,7 @@ from omegaconf.errors import ConfigAttributeError, ConfigKeyError, ValidationErr
 from hydra.errors import ConfigCompositionException
 
 from ppo_torchrl.errors import ConfigError
-from ppo_torchrl.trainer import validate_config
+from ppo_torchrl.validation import validate_config
 
 from conftest import compose_config
 

@@ -7,7 +7,8 @@ import cloudpickle
 import pytest
 
 from ppo_torchrl import report
-from ppo_torchrl.trainer import Trainer, validate_config
+from ppo_torchrl.trainer import Trainer
+from ppo_torchrl.validation import validate_config
 
 from conftest import TINY, compose_config, run_cli
 

@@ -7,7 +7,8 @@ import torch
 
 from ppo_torchrl.collector import FastCollector
 from ppo_torchrl.losses import make_loss_step
-from ppo_torchrl.trainer import LOSS_INPUT_KEYS, Trainer, use_compile
+from ppo_torchrl.losses import LOSS_INPUT_KEYS
+from ppo_torchrl.trainer import Trainer, use_compile
 
 LOSSES = ["clip_ppo", "kl_ppo", "ppo", "a2c", "reinforce"]
 HEADS = ["normal", "tanh_normal"]

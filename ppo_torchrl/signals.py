@@ -1,0 +1,99 @@
+"""SIGINT / SIGTERM at any moment of a run end in one line that says what is on disk.
+
+- From process start (`install()`), a signal interrupts whatever runs (an import, env building,
+  compile) and the entry point's error path reports it: exit 130 (SIGINT) or 143 (SIGTERM).
+- In the training loop (`StopRequest`), the first signal asks the loop to stop after the current
+  iteration, which then saves a checkpoint; a second one abandons the iteration at once.
+Either way the line is built from `ON_DISK`, which the trainer updates as it saves, so it never
+claims a checkpoint that is not there.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import threading
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Optional
+
+SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+@dataclass
+class OnDisk:
+    run_dir: Optional[Path] = None
+    checkpoint: Optional[Path] = None  # the newest checkpoint this run has on disk
+    checkpoint_frames: int = 0
+    frames: int = 0  # frames trained so far
+
+    def describe(self) -> str:
+        if self.checkpoint is not None:
+            return (f"the last checkpoint on disk is {self.checkpoint} at frame {self.checkpoint_frames} "
+                    f"(resume with: python -m ppo_torchrl resume={self.run_dir})")
+        again = f"; to start again in {self.run_dir} add overwrite=true" if self.run_dir else ""
+        if self.frames:
+            return f"nothing was saved: the run had done {self.frames} frames and no checkpoint yet{again}"
+        return f"nothing was saved{again}"
+
+
+ON_DISK = OnDisk()
+
+
+class Interrupt(KeyboardInterrupt):
+    """A signal turned into an exception; `signum` sets the exit code (128 + signum)."""
+
+    def __init__(self, signum: int):
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+def _interrupt(signum, frame) -> None:
+    raise Interrupt(signum)
+
+
+def _exit_during_startup(signum, frame) -> None:
+    print("interrupted: stopped at once during start-up; nothing was saved", file=sys.stderr, flush=True)
+    os._exit(128 + signum)
+
+
+def install_for_startup() -> None:
+    """`python -m ppo_torchrl[.entry]`: a signal while the modules import exits at once with one line
+    (nothing is open or written yet); each entry point then calls `install()`."""
+    if threading.current_thread() is threading.main_thread():
+        for signum in SIGNALS:
+            signal.signal(signum, _exit_during_startup)
+
+
+def install() -> None:
+    """Signals raise `Interrupt` (SIGTERM too, whose default would end the process silently)."""
+    if threading.current_thread() is threading.main_thread():
+        for signum in SIGNALS:
+            signal.signal(signum, _interrupt)
+
+
+class StopRequest:
+    """The loop's handlers: the first signal sets `signum` (stop after this iteration and save),
+    a second one raises `Interrupt` at once."""
+
+    def __init__(self):
+        self.signum: Optional[int] = None
+        self._previous = {}
+
+    def __enter__(self) -> "StopRequest":
+        if threading.current_thread() is threading.main_thread():
+            for signum in SIGNALS:
+                self._previous[signum] = signal.signal(signum, self._handle)
+        return self
+
+    def _handle(self, signum, frame) -> None:
+        if self.signum is not None:
+            raise Interrupt(signum)
+        self.signum = signum
+        print(f"{signal.Signals(signum).name}: stopping after this iteration to save a checkpoint "
+              "(send it again to stop at once)", file=sys.stderr, flush=True)
+
+    def __exit__(self, *exc) -> None:
+        for signum, handler in self._previous.items():
+            signal.signal(signum, handler)

@@ -1,0 +1,125 @@
+"""Every value checked before anything runs or is written: the entry point calls `validate_config`
+on the composed config before Hydra starts the job, and the trainer calls it again (tests and
+library users build a Trainer directly). The schema (config.py) already checks keys and types;
+this checks ranges, choices against each component's registry, and the env itself (it is built
+once, so a missing dependency or a bad model file fails here and not after hours of training).
+"""
+
+from __future__ import annotations
+
+from omegaconf import OmegaConf
+
+from ppo_torchrl.errors import ConfigError
+
+SEED_LIMIT = 2**32  # numpy's and gymnasium's seeds are 32-bit
+COMPILE_CHOICES = ("auto", "true", "false")
+OBS_NORMS = ("running", "fixed", "none")
+REWARD_NORMS = ("return", "scale", "none")
+CRITIC_LOSSES = ("l2", "l1", "smooth_l1")
+
+
+def one_of(name: str, value, choices) -> tuple:
+    return value in choices, f"{name}='{value}' is not known; use one of {', '.join(choices)}"
+
+
+def validate_config(cfg):
+    """Raise ConfigError naming the first bad value; return the env's spec (shapes and bounds)."""
+    from ppo_torchrl.advantage import ESTIMATORS
+    from ppo_torchrl.collector import BACKENDS
+    from ppo_torchrl.envs import env_spec
+    from ppo_torchrl.loggers import LOGGERS
+    from ppo_torchrl.losses import LOSSES, OPTIMIZERS, NOT_COMPILABLE
+    from ppo_torchrl.models import validate_policy_config
+
+    missing = sorted(OmegaConf.missing_keys(cfg))
+    if missing:
+        example = " (any registered Gymnasium id: env=gym env.id=Swimmer-v4)" if "env.id" in missing else ""
+        raise ConfigError(f"{', '.join(missing)} must be given{example}")
+    check_keys_against_schema(cfg)
+    c, loss, t, adv, env = cfg.collector, cfg.loss, cfg.env.transforms, cfg.advantage, cfg.env
+    compile_choice = str(cfg.compile).lower()
+    positive_or_null = lambda v: v is None or v > 0  # noqa: E731
+    checks = [
+        (0 <= cfg.seed < SEED_LIMIT, f"seed={cfg.seed} must be in [0, 2^32)"),
+        (c.num_envs >= 1, f"collector.num_envs={c.num_envs} must be >= 1"),
+        (c.frames_per_batch >= 1, f"collector.frames_per_batch={c.frames_per_batch} must be >= 1"),
+        (c.num_envs < 1 or c.frames_per_batch % c.num_envs == 0,
+         f"collector.frames_per_batch={c.frames_per_batch} must be divisible by collector.num_envs={c.num_envs}"),
+        (c.total_frames >= c.frames_per_batch,
+         f"collector.total_frames={c.total_frames} must be >= collector.frames_per_batch={c.frames_per_batch}"),
+        one_of("collector.backend", c.backend, BACKENDS),
+        one_of("compile", compile_choice, COMPILE_CHOICES),
+        (not (compile_choice == "true" and loss.name in NOT_COMPILABLE),
+         f"compile=true does not work with loss={loss.name}: {NOT_COMPILABLE.get(loss.name)}; use compile=auto or false"),
+        one_of("optim.name", cfg.optim.name, OPTIMIZERS),
+        (cfg.optim.lr > 0, f"optim.lr={cfg.optim.lr} must be > 0"),
+        (cfg.optim.eps > 0, f"optim.eps={cfg.optim.eps} must be > 0"),
+        (cfg.optim.weight_decay >= 0, f"optim.weight_decay={cfg.optim.weight_decay} must be >= 0"),
+        (positive_or_null(cfg.optim.max_grad_norm),
+         f"optim.max_grad_norm={cfg.optim.max_grad_norm} must be > 0 (or null to disable)"),
+        one_of("loss.name", loss.name, LOSSES),
+        (loss.epochs >= 1, f"loss.epochs={loss.epochs} must be >= 1"),
+        (positive_or_null(loss.minibatch_size), f"loss.minibatch_size={loss.minibatch_size} must be >= 1"),
+        (not loss.minibatch_size or c.frames_per_batch % loss.minibatch_size == 0,
+         f"collector.frames_per_batch={c.frames_per_batch} is not divisible into minibatches of "
+         f"loss.minibatch_size={loss.minibatch_size}"),
+        (0 < loss.clip_epsilon < 1, f"loss.clip_epsilon={loss.clip_epsilon} must be in (0, 1): the ratio is "
+                                    "clipped to [1 - eps, 1 + eps]"),
+        (loss.entropy_coef >= 0 and loss.critic_coef >= 0,
+         f"loss.entropy_coef={loss.entropy_coef} and loss.critic_coef={loss.critic_coef} must be >= 0"),
+        one_of("loss.critic_loss", loss.critic_loss, CRITIC_LOSSES),
+        (positive_or_null(loss.clip_value), f"loss.clip_value={loss.clip_value} must be > 0 (or null)"),
+        (loss.kl_target > 0 and loss.kl_beta >= 0, f"loss.kl_target={loss.kl_target} must be > 0 and loss.kl_beta >= 0"),
+        (loss.entropy_samples >= 1, f"loss.entropy_samples={loss.entropy_samples} must be >= 1"),
+        one_of("advantage.name", adv.name, ESTIMATORS),
+        (0 <= adv.gamma <= 1 and 0 <= adv.lmbda <= 1,
+         f"advantage.gamma={adv.gamma} and advantage.lmbda={adv.lmbda} must lie in [0, 1]"),
+        one_of("env.transforms.obs_norm", t.obs_norm, OBS_NORMS),
+        one_of("env.transforms.reward_norm", t.reward_norm, REWARD_NORMS),
+        (t.obs_norm_init_frames >= 2, f"env.transforms.obs_norm_init_frames={t.obs_norm_init_frames} must be >= 2"),
+        (positive_or_null(t.obs_clip), f"env.transforms.obs_clip={t.obs_clip} must be > 0 (or null: no clipping)"),
+        (positive_or_null(t.reward_clip), f"env.transforms.reward_clip={t.reward_clip} must be > 0 (or null: no clipping)"),
+        (t.reward_scale > 0, f"env.transforms.reward_scale={t.reward_scale} must be > 0"),
+        (t.norm_epsilon > 0, f"env.transforms.norm_epsilon={t.norm_epsilon} must be > 0"),
+        (positive_or_null(env.max_episode_steps),
+         f"env.max_episode_steps={env.max_episode_steps} must be > 0 (or null: the env's own limit)"),
+        (env.locomotion.frame_skip >= 1, f"env.locomotion.frame_skip={env.locomotion.frame_skip} must be >= 1"),
+        (cfg.eval.every_frames >= 0 and cfg.eval.episodes >= 1 and cfg.eval.final_episodes >= 0,
+         "eval.every_frames and eval.final_episodes must be >= 0 and eval.episodes >= 1"),
+        (cfg.checkpoint.every_frames >= 0 and cfg.checkpoint.keep_last >= 0,
+         "checkpoint.every_frames and checkpoint.keep_last must be >= 0"),
+        one_of("logger", cfg.logger.name, LOGGERS),
+        (cfg.torch_threads >= 1, f"torch_threads={cfg.torch_threads} must be >= 1"),
+    ]
+    for ok, message in checks:
+        if not ok:
+            raise ConfigError(message)
+    resolve_device(cfg.device)
+    validate_policy_config(cfg.policy)
+    return env_spec(cfg.env)
+
+
+def resolve_device(name: str):
+    import torch
+
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if name not in ("cpu", "cuda") and not name.startswith("cuda:"):
+        raise ConfigError(f"device='{name}' is not allowed; use cpu, cuda or auto")
+    if name.startswith("cuda") and not torch.cuda.is_available():
+        raise ConfigError(f"device='{name}' was asked for but no CUDA device is available; use device=cpu or device=auto")
+    return torch.device(name)
+
+
+def check_keys_against_schema(cfg) -> None:
+    """`+group.key=v` can add a key the schema lacks; such a key would be silently ignored."""
+    from ppo_torchrl.config import Config
+
+    schema = OmegaConf.structured(Config)
+    data = OmegaConf.to_container(cfg, resolve=False)
+    data.pop("hydra", None)
+    try:
+        OmegaConf.merge(schema, data)
+    except Exception as exc:  # omegaconf's key/validation errors carry the full key
+        key = getattr(exc, "full_key", None) or ""
+        raise ConfigError(f"unknown or invalid config key '{key}': {str(exc).splitlines()[0]}") from exc
