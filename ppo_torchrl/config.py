@@ -72,9 +72,13 @@ class PolicyConfig:
     std: str = "state_independent"
     log_std_init: float = 0.0
     std_min: float = 0.0  # floor added under the std; 0 disables it
+    # Hidden layers of the actor (and of the shared trunk) and of the critic: their number and widths.
     hidden_sizes: List[int] = field(default_factory=lambda: [64, 64])
     critic_hidden_sizes: List[int] = field(default_factory=lambda: [64, 64])
-    width: Optional[int] = None  # when set, every hidden layer (actor and critic) has this width
+    # When set, it wins: every hidden layer of actor and critic gets this width and the lists above
+    # give only the number of layers (conf/env/Hopper-v4.yaml sets 128: a 128-128 actor and critic
+    # although hidden_sizes reads [64, 64]). null: the lists apply as written.
+    width: Optional[int] = None
     activation: str = "tanh"  # tanh | relu | elu
     shared_trunk: bool = False  # one trunk (hidden_sizes) with a policy head and a value head
     ortho_init: bool = True  # orthogonal init, gain sqrt(2) hidden, policy_head_gain, value_head_gain

@@ -108,7 +108,17 @@ def main(argv: list[str]) -> dict:
     from ppo_torchrl.cli import parse_args
 
     usage = "python -m ppo_torchrl.evaluate run=<run dir> [checkpoint=best|last|<file>] [episodes=10] [video=false] [seed=0]"
-    args = parse_args(argv, {"run": None, "checkpoint": "best", "episodes": 10, "video": False, "seed": 0}, usage)
+    help = {
+        "run": "the run dir to evaluate (one with config.yaml and checkpoints/)",
+        "checkpoint": "best, last, or a checkpoint file",
+        "episodes": "number of deterministic episodes",
+        "video": "also film the first episode: <run dir>/eval/<checkpoint>.mp4 (MUJOCO_GL=egl)",
+        "seed": "episode i starts from seed * 1000 + i: the same seed replays the same episodes",
+    }
+    about = ("Runs the policy deterministically on a fresh env with the run's frozen normalization stats, prints\n"
+             "mean +- std return and length and writes <run dir>/eval/eval.json.")
+    args = parse_args(argv, {"run": None, "checkpoint": "best", "episodes": 10, "video": False, "seed": 0}, usage,
+                      help, about)
     if args["episodes"] < 1:
         raise ConfigError(f"episodes={args['episodes']} must be >= 1")
     run_dir = Path(args["run"])

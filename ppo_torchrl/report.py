@@ -166,8 +166,16 @@ def plot_sweep(sweep_dir: Path) -> List[Path]:
 
 def main(argv: List[str]) -> List[Path]:
     """A run dir gets report.png; a multirun (sweep) dir gets sweep_report.{png,md,csv}."""
+    usage = "python -m ppo_torchrl.report <run dir or sweep dir>"
+    if "--help" in argv or "-h" in argv:
+        from ppo_torchrl.cli import print_help
+
+        print_help(usage, {"<run dir or sweep dir>": ("a run dir gets report.png, a sweep (multirun) dir "
+                                                       "sweep_report.png, .md and .csv", None)},
+                   "Plots a run's returns and PPO diagnostics against frames, or a sweep's return curves (mean and\n"
+                   "95% CI over seeds) and final returns per group of runs that differ only in seed.")
     if len(argv) != 1:
-        raise ConfigError("usage: python -m ppo_torchrl.report <run dir or sweep dir>")
+        raise ConfigError(f"usage: {usage}")
     target = Path(argv[0])
     if not target.is_dir():
         raise ConfigError(f"{target} is not a directory")
