@@ -90,6 +90,35 @@ def check_composes(args: list[str]) -> None:
         raise ConfigError(one_line(exc)) from exc
 
 
+def compose_with_hydra(args: list[str]):
+    """The config of `args`' overrides with its hydra node (launcher, sweeper); sweeps take no part."""
+    from hydra import compose, initialize_config_dir
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+    from hydra.errors import HydraException
+    from omegaconf.errors import OmegaConfBaseException
+
+    try:
+        parsed = OverridesParser.create().parse_overrides([a for a in args if "=" in a and not a.startswith("-")])
+        with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
+            return compose(config_name="config", overrides=[o.input_line for o in parsed if not o.is_sweep_override()],
+                           return_hydra_config=True)
+    except (HydraException, OmegaConfBaseException) as exc:
+        raise ConfigError(one_line(exc)) from exc
+
+
+def announce_study(args: list[str]) -> None:
+    """`-m hparams_search=...`: say, before it starts, whether the Optuna study is new or resumed."""
+    import optuna
+
+    sweeper = compose_with_hydra(args).hydra.sweeper
+    name, storage = sweeper.study_name, sweeper.storage
+    if storage.startswith("sqlite:///"):  # sqlite makes the file, not its folder
+        Path(storage[len("sqlite:///"):]).parent.mkdir(parents=True, exist_ok=True)
+    trials = {study.study_name: study.n_trials for study in optuna.get_all_study_summaries(storage)}
+    state = f"resuming study {name} with {trials[name]} trials" if name in trials else f"new study {name}"
+    print(f"optuna: {state} in {storage}", file=sys.stderr, flush=True)
+
+
 def one_line(exc: BaseException) -> str:
     """Hydra's multi-line messages, folded: what failed, then the first line of why."""
     lines = [l.strip() for l in str(exc).splitlines() if l.strip()]
@@ -118,8 +147,11 @@ if __name__ == "__main__":
     try:
         check_env_override(argv)
         sys.argv += check_resume(argv)
-        if not multirun and not any(a.split("=")[0] in HYDRA_FLAGS_WITHOUT_RUN for a in argv):
+        runs = not any(a.split("=")[0] in HYDRA_FLAGS_WITHOUT_RUN for a in argv)
+        if not multirun and runs:
             check_composes(argv)
+        if multirun and runs and any(a.startswith("hparams_search=") for a in argv):
+            announce_study(argv)
     except ConfigError as err:
         report_and_exit(err)
     main()

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional
 
 from hydra.core.config_store import ConfigStore
-from omegaconf import MISSING
+from omegaconf import MISSING, OmegaConf
 
 
 @dataclass
@@ -189,11 +189,20 @@ class Config:
     # a checkpoint file); init_from_optimizer also takes its optimizer state.
     init_from: Optional[str] = None
     init_from_optimizer: bool = False
+    # With -m hparams_search=<file>: a tag added to the Optuna study's name, which already holds the
+    # search file, env id and total_frames (conf/hparams_search), to keep apart studies they don't tell apart.
+    hparams_search_name: Optional[str] = None
+
+
+def study_name(*parts) -> str:
+    """`${ppo.study_name:optuna,Hopper-v4,1000000frames,null}` -> optuna_Hopper-v4_1000000frames."""
+    return "_".join(str(part) for part in parts if part is not None)
 
 
 def register_configs() -> None:
     cs = ConfigStore.instance()
     cs.store(name="base_config", node=Config)
+    OmegaConf.register_new_resolver("ppo.study_name", study_name, replace=True)
 
 
 register_configs()
