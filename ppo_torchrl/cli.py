@@ -45,7 +45,8 @@ def print_help(usage: str, arguments: Dict[str, Tuple[str, Any]], about: str = "
     lines = [f"usage: {usage}", ""] + ([about, ""] if about else []) + ["arguments:"]
     width = max(len(name) for name in arguments) + 2
     for name, (meaning, default) in arguments.items():
-        shown = "required" if default is None else f"default: {str(default).lower() if isinstance(default, bool) else default}"
+        shown = str(default).lower() if isinstance(default, bool) else default
+        shown = "required" if default is None else f"default: {shown}"
         lines.append(f"  {name:<{width}}{meaning} ({shown})")
     print("\n".join(lines))
     raise SystemExit(0)
