@@ -1,6 +1,7 @@
 """Evaluate, video, export, loggers, progress and report on real short runs."""
 
 import json
+import re
 import subprocess
 import sys
 
@@ -11,6 +12,7 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type
 
 from ppo_torchrl import export, report
 from ppo_torchrl.checkpoint import load_policy
+from ppo_torchrl.evaluate import EpisodeProgress, evaluate_policy
 from ppo_torchrl.loggers import Progress
 from ppo_torchrl.trainer import Trainer
 
@@ -39,11 +41,30 @@ def test_evaluate_cli_writes_json_and_video(trained_run):
     result = run_cli(f"run={trained_run}", "episodes=2", "video=true", module="ppo_torchrl.evaluate")
     assert result.returncode == 0, result.stderr[-2000:]
     assert "return" in result.stdout and "+-" in result.stdout
+    assert re.search(r"^eval: 1/2 episodes, \d+ s elapsed, ETA \d+ s$", result.stderr, re.M)  # progress, off a TTY
     data = json.loads((trained_run / "eval" / "eval.json").read_text())
     assert len(data["returns"]) == 2 and data["episodes"] == 2 and data["checkpoint"] == "best"
     video = trained_run / "eval" / "best.mp4"
     assert video.stat().st_size > 1000
     assert video.read_bytes()[4:8] == b"ftyp"  # an mp4 container
+
+
+def test_eval_progress_only_when_asked_or_slow(trained_run, capsys):
+    cfg, ac, state = load_policy(trained_run, "last")
+    evaluate_policy(cfg, ac, state["normalization"]["obs"], 2, seed=0)  # as training calls it: a short eval is silent
+    assert capsys.readouterr().err == ""
+    evaluate_policy(cfg, ac, state["normalization"]["obs"], 2, seed=0, progress=True)
+    lines = capsys.readouterr().err.splitlines()  # after the first episode, then at most every 10 s
+    assert len(lines) == 1 and re.fullmatch(r"eval: 1/2 episodes, \d+ s elapsed, ETA \d+ s", lines[0])
+
+    slow = EpisodeProgress(4, progress=None, tty=False)
+    slow.start -= 6  # an eval running for 6 s already: past the quiet period, so it reports
+    slow.update(1)
+    assert capsys.readouterr().err == "eval: 1/4 episodes, 6 s elapsed, ETA 18 s\n"
+    terminal = EpisodeProgress(2, progress=True, tty=True)
+    terminal.update(1)
+    terminal.update(2)  # one updating line, erased when the eval ends
+    assert capsys.readouterr().err == "\reval: 1/2 episodes, 0 s elapsed, ETA 0 s\r\x1b[K"
 
 
 def test_evaluate_bad_input_is_one_line(trained_run):
