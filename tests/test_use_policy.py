@@ -7,6 +7,7 @@ import sys
 
 import pytest
 import torch
+from matplotlib.container import ErrorbarContainer
 from tensordict import TensorDict
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
@@ -146,3 +147,29 @@ def test_progress_plain_lines_off_a_terminal(capsys):
 def test_report_png(trained_run):
     out = report.main([str(trained_run)])[0]
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and out.stat().st_size > 20_000
+
+
+def test_report_marks_each_eval_and_says_what_each_train_curve_averages(tmp_path):
+    # InvertedPendulum-like: short episodes first, then 1000-step ones, two per iteration; one eval
+    (tmp_path / "metrics.csv").write_text(
+        "iteration,frames,train/episodes,train/episode_return,train/return_last100,eval/return_mean,eval/return_std\n"
+        "1,2048,90,10.0,10.0,,\n"
+        "2,4096,8,200.0,25.0,,\n"
+        "3,6144,2,1000.0,44.0,950.0,30.0\n")
+    fig = report.run_figure(tmp_path)
+    ax = fig.axes[0]
+    [eval_bars] = [c for c in ax.containers if isinstance(c, ErrorbarContainer)]
+    point = eval_bars.lines[0]
+    assert point.get_marker() == "o" and point.get_linestyle() == "None"  # a marker, no connecting line
+    assert (list(point.get_xdata()), list(point.get_ydata())) == ([6144], [950])
+    assert eval_bars.lines[2][0].get_segments()[0][:, 1].tolist() == [920, 980]  # its +- std bar
+    assert [t.get_text() for t in ax.get_legend().get_texts()] == [
+        "train: mean of the episodes finished in each iteration",
+        "train: mean of the last 100 finished episodes (at the end they span the last 6,144 frames, so it lags)",
+        "eval: deterministic, mean +- std over its episodes",
+    ]
+    import matplotlib.pyplot as plt  # after run_figure chose the Agg backend
+
+    plt.close(fig)
+    assert report.plot_run(tmp_path).read_bytes()[:4] == b"\x89PNG"
+
