@@ -7,6 +7,7 @@ sweeper such as Optuna maximizes.
 
 from __future__ import annotations
 
+import itertools
 import sys
 from pathlib import Path
 
@@ -119,6 +120,39 @@ def announce_study(args: list[str]) -> None:
     print(f"optuna: {state} in {storage}", file=sys.stderr, flush=True)
 
 
+def dry_run(args: list[str]) -> list[str]:
+    """`-m ... --cfg job|hydra|all` (or `--info`), which Hydra refuses ("Only one of --run, --multirun,
+    --cfg, --info ..."): print the launcher and the jobs, and return the arguments that make Hydra
+    show job #0 as the multirun would compose it."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    cfg = compose_with_hydra(args)
+    overrides = [a for a in args if "=" in a and not a.startswith("-")]
+    parsed = OverridesParser.create().parse_overrides(overrides)
+    task = [o for o in parsed if not o.is_hydra_override()]
+    sweeper = cfg.hydra.sweeper._target_
+    basic = sweeper.endswith(".BasicSweeper")
+    if basic and any(o.is_sweep_override() and not o.is_discrete_sweep() for o in task):
+        raise ConfigError("-m sweeps over lists, choice() or range(); interval() needs hparams_search=optuna")
+    print(f"# dry run of -m: launcher {cfg.hydra.launcher._target_}, sweep dir {cfg.hydra.sweep.dir}")
+    if basic:
+        values = [[f"{o.get_key_element()}={v}" for v in o.sweep_string_iterator()] if o.is_sweep_override()
+                  else [o.input_line] for o in task]
+        jobs = [list(job) for job in itertools.product(*values)]
+        print(f"# {len(jobs)} job{'s' if len(jobs) > 1 else ''}:")
+        for num, job in enumerate(jobs):
+            print(f"#   #{num} : {' '.join(job)}")
+        first = jobs[0]
+    else:  # Optuna: each trial's values are chosen as the search runs
+        print(f"# {sweeper.rsplit('.', 1)[-1]}: {cfg.hydra.sweeper.get('n_trials', '?')} trials, values chosen as "
+              "it runs; shown: the config without them")
+        first = [o.input_line for o in task if not o.is_sweep_override()]
+    print(f"# job #0{'' if basic else ' (before the sweeper sets its values)'}:")
+    hydra_args = [o.input_line for o in parsed if o.is_hydra_override()]
+    flags = [a for a in args if a not in overrides and a not in ("-m", "--multirun")]
+    return [*flags, *first, *hydra_args, "hydra.mode=MULTIRUN"]
+
+
 def one_line(exc: BaseException) -> str:
     """Hydra's multi-line messages, folded: what failed, then the first line of why."""
     lines = [l.strip() for l in str(exc).splitlines() if l.strip()]
@@ -152,6 +186,8 @@ if __name__ == "__main__":
             check_composes(argv)
         if multirun and runs and any(a.startswith("hparams_search=") for a in argv):
             announce_study(argv)
+        if multirun and any(a.split("=")[0] in ("--cfg", "-c", "--info", "-i") for a in argv):
+            sys.argv[1:] = dry_run(argv)
     except ConfigError as err:
         report_and_exit(err)
     main()

@@ -5,6 +5,7 @@ import pickle
 
 import cloudpickle
 import pytest
+from omegaconf import OmegaConf
 
 from ppo_torchrl import report
 from ppo_torchrl.trainer import Trainer, validate_config
@@ -77,6 +78,28 @@ def test_launcher_configs_compose(launcher):
         pytest.importorskip("hydra_plugins.hydra_ray_launcher", reason="the [ray] extra is not installed")
     cfg = compose_config([f"hydra/launcher={launcher}"], return_hydra_config=True)
     assert "Launcher" in cfg.hydra.launcher._target_
+
+
+def test_multirun_dry_run_shows_the_launcher_the_jobs_and_the_first_jobs_config(tmp_path):
+    # Hydra alone refuses -m with --cfg ("Only one of --run, --multirun, --cfg, --info ... can be specified")
+    args = ["-m", "seed=1,2", "env=Hopper-v4,Walker2d-v4", "hydra/launcher=submitit_slurm",
+            "hydra.launcher.partition=gpu"]
+    result = run_cli(*args, "--cfg", "hydra", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr[-2000:]
+    lines = result.stdout.splitlines()
+    assert lines[0].startswith("# dry run of -m: launcher hydra_plugins.hydra_submitit_launcher.submitit_launcher."
+                               "SlurmLauncher, sweep dir outputs/multirun/")
+    assert lines[1:7] == ["# 4 jobs:", "#   #0 : seed=1 env=Hopper-v4", "#   #1 : seed=1 env=Walker2d-v4",
+                          "#   #2 : seed=2 env=Hopper-v4", "#   #3 : seed=2 env=Walker2d-v4", "# job #0:"]
+    hydra_cfg = OmegaConf.create(result.stdout).hydra  # the lines above are YAML comments
+    assert hydra_cfg.launcher.partition == "gpu" and hydra_cfg.mode == "MULTIRUN"
+    assert hydra_cfg.overrides.task == ["seed=1", "env=Hopper-v4"]
+
+    job = run_cli(*args, "--cfg", "job", cwd=tmp_path)
+    assert job.returncode == 0, job.stderr[-2000:]
+    cfg = OmegaConf.create(job.stdout)
+    assert (cfg.seed, cfg.env.id) == (1, "Hopper-v4")
+    assert list(tmp_path.iterdir()) == []  # nothing ran, nothing was written
 
 
 def test_the_job_function_pickles():
