@@ -112,7 +112,8 @@ def check_resume(resume: str, overrides: list[str]) -> Path:
 
 
 def compose(overrides: list[str], with_hydra: bool = False):
-    """The config as Hydra will compose it; a bad override is one line, not Hydra's report."""
+    """The config as Hydra will compose it (with its hydra node: launcher, sweeper, dirs, if asked);
+    a bad override is one line, not Hydra's report."""
     from hydra import compose as hydra_compose
     from hydra import initialize_config_dir
     from hydra.errors import HydraException
@@ -150,6 +151,49 @@ def sweep_jobs(overrides: list[str]) -> list[list[str]]:
     return [list(job) for job in itertools.islice(itertools.product(*axes), MAX_VALIDATED_JOBS)]
 
 
+def hydra_overrides(overrides: list[str]) -> list[str]:
+    return [o for o in overrides if o.lstrip("+~").startswith(("hydra.", "hydra/"))]
+
+
+def announce_study(hydra_cfg) -> None:
+    """`-m hparams_search=...`: say, before it starts, whether the Optuna study is new or resumed."""
+    import optuna
+
+    sweeper = hydra_cfg.hydra.sweeper
+    name, storage = sweeper.study_name, sweeper.storage
+    if storage.startswith("sqlite:///"):  # sqlite makes the file, not its folder
+        Path(storage[len("sqlite:///"):]).parent.mkdir(parents=True, exist_ok=True)
+    trials = {study.study_name: study.n_trials for study in optuna.get_all_study_summaries(storage)}
+    state = f"resuming study {name} with {trials[name]} trials" if name in trials else f"new study {name}"
+    print(f"optuna: {state} in {storage}", file=sys.stderr, flush=True)
+
+
+def dry_run(flags: list[str], overrides: list[str]) -> list[str]:
+    """`-m ... --cfg job|hydra|all` (or `--info`), which Hydra refuses ("Only one of --run, --multirun,
+    --cfg, --info ..."): print the launcher and the jobs, and return the arguments that make Hydra
+    show job #0 as the multirun would compose it."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    jobs = sweep_jobs(overrides)
+    cfg = compose(jobs[0] + hydra_overrides(overrides), with_hydra=True)
+    sweeper = cfg.hydra.sweeper._target_
+    basic = sweeper.endswith(".BasicSweeper")
+    parsed = OverridesParser.create().parse_overrides(overrides)
+    if basic and any(o.is_sweep_override() and not o.is_discrete_sweep() for o in parsed):
+        raise ConfigError("-m sweeps over lists, choice() or range(); interval() needs hparams_search=optuna")
+    print(f"# dry run of -m: launcher {cfg.hydra.launcher._target_}, sweep dir {cfg.hydra.sweep.dir}")
+    if basic:
+        print(f"# {len(jobs)} job{'s' if len(jobs) > 1 else ''}:")
+        for num, job in enumerate(jobs):
+            print(f"#   #{num} : {' '.join(job)}")
+    else:  # Optuna: each trial's values are chosen as the search runs
+        print(f"# {sweeper.rsplit('.', 1)[-1]}: {cfg.hydra.sweeper.get('n_trials', '?')} trials, values chosen as "
+              "it runs; shown: the config without them")
+    print(f"# job #0{'' if basic else ' (before the sweeper sets its values)'}:")
+    shown = [f for f in flags if f not in ("-m", "--multirun")]
+    return [*shown, *jobs[0], *hydra_overrides(overrides), "hydra.mode=MULTIRUN"]
+
+
 def quoted(path: Path) -> str:
     return "'" + str(path).replace("\\", "\\\\").replace("'", "\\'") + "'"
 
@@ -172,7 +216,7 @@ def prepare(argv: list[str]) -> list[str]:
     if any(f in INFO_FLAGS for f in flags):  # print or inspect: check the config, write nothing
         for job in sweep_jobs(overrides) if multirun else [overrides]:
             compose(job)
-        return argv
+        return dry_run(flags, overrides) if multirun else argv
     if resume and not multirun:
         run_dir = check_resume(resume, overrides)
         rundir.claim(run_dir, resume=True)
@@ -180,10 +224,12 @@ def prepare(argv: list[str]) -> list[str]:
         return argv + [f"hydra.run.dir={quoted(run_dir)}", "hydra.output_subdir=null"]
     for job in sweep_jobs(overrides) if multirun else [overrides]:
         validate_config(compose(job))
-    hydra_cfg = compose(overrides if not multirun else sweep_jobs(overrides)[0] + [
-        o for o in overrides if o.lstrip("+~").startswith(("hydra.", "hydra/"))], with_hydra=True)
+    hydra_cfg = compose(overrides if not multirun else sweep_jobs(overrides)[0] + hydra_overrides(overrides),
+                        with_hydra=True)
     overwrite = bool(hydra_cfg.get("overwrite", False))
     if multirun:
+        if any(o.startswith("hparams_search=") for o in overrides):
+            announce_study(hydra_cfg)
         sweep_dir = Path(hydra_cfg.hydra.sweep.dir)
         rundir.claim(sweep_dir, overwrite=overwrite, what="sweep")
         return with_override(argv, "hydra.sweep.dir", quoted(sweep_dir))
@@ -217,6 +263,8 @@ def one_line(exc: BaseException) -> str:
 
 def cli() -> None:
     import hydra
+
+    import ppo_torchrl.config  # noqa: F401  (registers the schemas)
 
     sys.argv = [sys.argv[0]] + prepare(sys.argv[1:])
     hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")(main)()

@@ -2,15 +2,21 @@
 
 from __future__ import annotations
 
-from typing import Any, Dict
+from typing import Any, Dict, Optional, Tuple
 
 from ppo_torchrl.errors import ConfigError
 
 TRUE, FALSE = {"true", "1", "yes"}, {"false", "0", "no"}
 
 
-def parse_args(argv: list[str], spec: Dict[str, Any], usage: str) -> Dict[str, Any]:
-    """spec: name -> default (its type is the default's; None means a required string)."""
+def parse_args(argv: list[str], spec: Dict[str, Any], usage: str, help: Optional[Dict[str, str]] = None,
+               about: str = "") -> Dict[str, Any]:
+    """spec: name -> default (its type is the default's; None means a required string).
+
+    help: name -> one line of meaning; with --help or -h anywhere, print the usage page and exit 0.
+    """
+    if "--help" in argv or "-h" in argv:
+        print_help(usage, {k: ((help or {}).get(k, ""), default) for k, default in spec.items()}, about)
     values = dict(spec)
     for arg in argv:
         key, sep, raw = arg.partition("=")
@@ -32,6 +38,18 @@ def parse_args(argv: list[str], spec: Dict[str, Any], usage: str) -> Dict[str, A
     if missing:
         raise ConfigError(f"missing {', '.join(k + '=...' for k in missing)}; usage: {usage}")
     return values
+
+
+def print_help(usage: str, arguments: Dict[str, Tuple[str, Any]], about: str = "") -> None:
+    """The usage page of an entry point: what it does, then each argument's meaning and default."""
+    lines = [f"usage: {usage}", ""] + ([about, ""] if about else []) + ["arguments:"]
+    width = max(len(name) for name in arguments) + 2
+    for name, (meaning, default) in arguments.items():
+        shown = str(default).lower() if isinstance(default, bool) else default
+        shown = "required" if default is None else f"default: {shown}"
+        lines.append(f"  {name:<{width}}{meaning} ({shown})")
+    print("\n".join(lines))
+    raise SystemExit(0)
 
 
 def run(main) -> None:

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional
 
 from hydra.core.config_store import ConfigStore
-from omegaconf import MISSING
+from omegaconf import MISSING, OmegaConf
 
 
 @dataclass
@@ -72,9 +72,13 @@ class PolicyConfig:
     std: str = "state_independent"
     log_std_init: float = 0.0
     std_min: float = 0.0  # floor added under the std; 0 disables it
+    # Hidden layers of the actor (and of the shared trunk) and of the critic: their number and widths.
     hidden_sizes: List[int] = field(default_factory=lambda: [64, 64])
     critic_hidden_sizes: List[int] = field(default_factory=lambda: [64, 64])
-    width: Optional[int] = None  # when set, every hidden layer (actor and critic) has this width
+    # When set, it wins: every hidden layer of actor and critic gets this width and the lists above
+    # give only the number of layers (conf/env/Hopper-v4.yaml sets 128: a 128-128 actor and critic
+    # although hidden_sizes reads [64, 64]). null: the lists apply as written.
+    width: Optional[int] = None
     activation: str = "tanh"  # tanh | relu | elu
     shared_trunk: bool = False  # one trunk (hidden_sizes) with a policy head and a value head
     ortho_init: bool = True  # orthogonal init, gain sqrt(2) hidden, policy_head_gain, value_head_gain
@@ -188,11 +192,20 @@ class Config:
     # a checkpoint file); init_from_optimizer also takes its optimizer state.
     init_from: Optional[str] = None
     init_from_optimizer: bool = False
+    # With -m hparams_search=<file>: a tag added to the Optuna study's name, which already holds the
+    # search file, env id and total_frames (conf/hparams_search), to keep apart studies they don't tell apart.
+    hparams_search_name: Optional[str] = None
+
+
+def study_name(*parts) -> str:
+    """`${ppo.study_name:optuna,Hopper-v4,1000000frames,null}` -> optuna_Hopper-v4_1000000frames."""
+    return "_".join(str(part) for part in parts if part is not None)
 
 
 def register_configs() -> None:
     cs = ConfigStore.instance()
     cs.store(name="base_config", node=Config)
+    OmegaConf.register_new_resolver("ppo.study_name", study_name, replace=True)
 
 
 register_configs()

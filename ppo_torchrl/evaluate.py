@@ -13,6 +13,9 @@ of the first episode (headless: MUJOCO_GL=egl).
 from __future__ import annotations
 
 import copy
+import math
+import sys
+import time
 from pathlib import Path
 from typing import Optional
 
@@ -26,12 +29,43 @@ from ppo_torchrl.models import ActorCritic
 
 VIDEO_FPS = 30
 VIDEO_SIZE = (480, 360)
+QUIET_S = 5.0  # progress=None (training's evals): no line unless the eval is still running after this
+EVERY_S = 10.0  # off a terminal, a plain progress line at most this often
+
+
+class EpisodeProgress:
+    """`eval: 3/10 episodes, 12 s elapsed, ETA 28 s` on stderr after an episode: on a terminal an
+    updating line, erased when the eval ends; otherwise a plain line at most every EVERY_S seconds."""
+
+    def __init__(self, total: int, progress: Optional[bool], tty: Optional[bool] = None):
+        self.total, self.start, self.last, self.shown = total, time.perf_counter(), -math.inf, False
+        self.quiet_s = math.inf if progress is False else 0.0 if progress else QUIET_S
+        self.tty = sys.stderr.isatty() if tty is None else tty
+
+    def update(self, done: int) -> None:
+        now = time.perf_counter()
+        elapsed = now - self.start
+        if self.tty and done == self.total:
+            if self.shown:  # the result line comes next, in its place
+                print("\r\x1b[K", end="", file=sys.stderr, flush=True)
+            return
+        if elapsed < self.quiet_s or (not self.tty and now - self.last < EVERY_S):
+            return
+        eta = elapsed / done * (self.total - done)
+        line = f"eval: {done}/{self.total} episodes, {elapsed:.0f} s elapsed, ETA {eta:.0f} s"
+        print("\r" + line if self.tty else line, end="" if self.tty else "\n", file=sys.stderr, flush=True)
+        self.last, self.shown = now, True
 
 
 @torch.no_grad()
 def evaluate_policy(cfg, ac: ActorCritic, obs_stats: Optional[dict], episodes: int, seed: int,
-                    deterministic: bool = True, video_path: Optional[Path] = None) -> dict:
-    """Run `episodes` episodes; with video_path, the first one is also written as an mp4."""
+                    deterministic: bool = True, video_path: Optional[Path] = None,
+                    progress: Optional[bool] = None) -> dict:
+    """Run `episodes` episodes; with video_path, the first one is also written as an mp4.
+
+    progress: True reports each episode on stderr (EpisodeProgress), False never, None only once the
+    eval has run for QUIET_S seconds (so short evals during training stay silent).
+    """
     render = {"render_mode": "rgb_array", "width": VIDEO_SIZE[0], "height": VIDEO_SIZE[1]} if video_path else {}
     env = make_torchrl_env(cfg.env, clip_actions=ac.head == "normal", gamma=cfg.advantage.gamma,
                            obs_stats=obs_stats, train=False, **render)
@@ -43,6 +77,7 @@ def evaluate_policy(cfg, ac: ActorCritic, obs_stats: Optional[dict], episodes: i
     sim = getattr(gym_env.unwrapped, "data", None)  # MuJoCo envs: qpos[0] is the base's x
     try:
         with set_exploration_type(mode):
+            shown = EpisodeProgress(episodes, progress)
             for i, episode_seed in enumerate(episode_seeds(seed, episodes)):
                 env.set_seed(episode_seed)
                 start = env.reset()
@@ -57,6 +92,7 @@ def evaluate_policy(cfg, ac: ActorCritic, obs_stats: Optional[dict], episodes: i
                 lengths.append(int(rollout.shape[-1]))
                 if sim is not None:
                     distances.append((x_start, float(sim.qpos[0])))
+                shown.update(i + 1)
     except Exception as exc:
         if video_path is not None and not frames:
             raise ConfigError(f"rendering is unavailable here ({type(exc).__name__}: {str(exc).splitlines()[0]}); "
@@ -108,14 +144,24 @@ def main(argv: list[str]) -> dict:
     from ppo_torchrl.cli import parse_args
 
     usage = "python -m ppo_torchrl.evaluate run=<run dir> [checkpoint=best|last|<file>] [episodes=10] [video=false] [seed=0]"
-    args = parse_args(argv, {"run": None, "checkpoint": "best", "episodes": 10, "video": False, "seed": 0}, usage)
+    help = {
+        "run": "the run dir to evaluate (one with config.yaml and checkpoints/)",
+        "checkpoint": "best, last, or a checkpoint file",
+        "episodes": "number of deterministic episodes",
+        "video": "also film the first episode: <run dir>/eval/<checkpoint>.mp4 (MUJOCO_GL=egl)",
+        "seed": "episode i starts from seed * 1000 + i: the same seed replays the same episodes",
+    }
+    about = ("Runs the policy deterministically on a fresh env with the run's frozen normalization stats, prints\n"
+             "mean +- std return and length and writes <run dir>/eval/eval.json.")
+    args = parse_args(argv, {"run": None, "checkpoint": "best", "episodes": 10, "video": False, "seed": 0}, usage,
+                      help, about)
     if args["episodes"] < 1:
         raise ConfigError(f"episodes={args['episodes']} must be >= 1")
     run_dir = Path(args["run"])
     cfg, ac, state = load_policy(run_dir, args["checkpoint"])
     video = run_dir / "eval" / f"{args['checkpoint'] if args['checkpoint'] in ('best', 'last') else 'checkpoint'}.mp4"
     result = evaluate_policy(cfg, ac, state["normalization"]["obs"], args["episodes"], seed=args["seed"],
-                             video_path=video if args["video"] else None)
+                             video_path=video if args["video"] else None, progress=True)
     result.update(env=env_label(cfg.env), checkpoint=args["checkpoint"], checkpoint_frames=state["frames"],
                   episodes=args["episodes"], video=str(video) if args["video"] else None)
     atomic_write_json(run_dir / "eval" / "eval.json", result)

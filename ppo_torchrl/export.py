@@ -63,7 +63,11 @@ def main(argv: list[str]) -> Path:
     from ppo_torchrl.cli import parse_args
 
     usage = "python -m ppo_torchrl.export run=<run dir> [checkpoint=best|last|<file>]"
-    args = parse_args(argv, {"run": None, "checkpoint": "best"}, usage)
+    help = {"run": "the run dir whose policy is exported; writes <run dir>/policy.pt",
+            "checkpoint": "best, last, or a checkpoint file"}
+    about = ("Writes the policy as TorchScript: a raw observation in, the deterministic action within the bounds\n"
+             "out, normalization baked in; it runs with torch alone: torch.jit.load('policy.pt')(obs).")
+    args = parse_args(argv, {"run": None, "checkpoint": "best"}, usage, help, about)
     run_dir = Path(args["run"])
     cfg, ac, state = load_policy(run_dir, args["checkpoint"])
     path = export_policy(cfg, ac, state["normalization"]["obs"], run_dir / "policy.pt")

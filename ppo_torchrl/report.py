@@ -2,9 +2,10 @@
 
 A run dir gets <run dir>/report.png.
 
-Panels: raw training return (per-iteration mean and last-100 mean) and deterministic eval return
-against frames, then the PPO debugging quantities: entropy, approx KL, clip fraction, value loss,
-explained variance and policy std.
+Panels: raw training return (mean of the episodes finished in each iteration, and mean of the last
+100 finished episodes, which lags while episodes grow longer) and deterministic eval return (a marker
+and its std per eval) against frames, then the PPO debugging quantities: entropy, approx KL, clip
+fraction, value loss, explained variance and policy std.
 
 A sweep (multirun) dir gets sweep_report.png (train return against frames, mean and 95% CI band
 over seeds, one curve per group of runs sharing their overrides minus `seed`) and
@@ -39,7 +40,25 @@ def read_metrics(path: Path) -> Dict[str, List[float]]:
     return {key: [float(r[key]) if r[key] not in ("", None) else float("nan") for r in rows] for key in rows[0]}
 
 
-def plot_run(run_dir: Path) -> Path:
+def last100_label(m: Dict[str, List[float]]) -> str:
+    """The last-100 curve's label, with how many frames its 100 episodes span at the end: while
+    episodes grow longer (few finish per iteration) the window reaches back far and the curve lags."""
+    import numpy as np
+
+    label = "train: mean of the last 100 finished episodes"
+    episodes = np.nan_to_num(np.asarray(m.get("train/episodes", [])))
+    if not episodes.size:
+        return label
+    back = np.cumsum(episodes[::-1])  # episodes finished in the last 1, 2, ... iterations
+    if back[-1] < 100:
+        return f"{label} (all {int(back[-1])} so far)"
+    first = len(episodes) - 1 - int(np.searchsorted(back, 100))  # the oldest iteration in the window
+    span = m["frames"][-1] - (m["frames"][first - 1] if first > 0 else 0)
+    return f"{label} (at the end they span the last {span:,.0f} frames, so it lags)"
+
+
+def run_figure(run_dir: Path):
+    """The run's figure: returns against frames on top, the PPO diagnostics below."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -54,12 +73,13 @@ def plot_run(run_dir: Path) -> Path:
     fig = plt.figure(figsize=(14, 9), constrained_layout=True)
     grid = fig.add_gridspec(3, 3)
     ax = fig.add_subplot(grid[0, :])
-    ax.plot(frames, m["train/episode_return"], alpha=0.35, label="train return (iteration mean)")
-    ax.plot(frames, m["train/return_last100"], label="train return (last 100 episodes)")
+    ax.plot(frames, m["train/episode_return"], alpha=0.35, label="train: mean of the episodes finished in each iteration")
+    ax.plot(frames, m["train/return_last100"], label=last100_label(m))
     evals = ~np.isnan(np.asarray(m["eval/return_mean"]))
-    if evals.any():
+    if evals.any():  # markers, not a line: evals are a few points, and one alone must show
         mean, std = np.asarray(m["eval/return_mean"])[evals], np.asarray(m["eval/return_std"])[evals]
-        ax.errorbar(frames[evals], mean, yerr=std, fmt="o-", capsize=3, label="eval return (deterministic)")
+        ax.errorbar(frames[evals], mean, yerr=std, fmt="o", markersize=6, capsize=4,
+                    label="eval: deterministic, mean +- std over its episodes")
     ax.set(xlabel="frames", ylabel="raw episode return")
     ax.legend(loc="best")
     ax.grid(alpha=0.3)
@@ -76,6 +96,14 @@ def plot_run(run_dir: Path) -> Path:
         s = json.loads(summary.read_text())
         title = f"{s['env']}  seed {s['seed']}  {s.get('loss', '')}/{s.get('policy', '')}  {s['frames']:,} frames"
     fig.suptitle(title)
+    return fig
+
+
+def plot_run(run_dir: Path) -> Path:
+    """<run dir>/report.png."""
+    import matplotlib.pyplot as plt
+
+    fig = run_figure(run_dir)
     out = Path(run_dir) / "report.png"
     fig.savefig(out, dpi=90)
     plt.close(fig)
@@ -166,8 +194,16 @@ def plot_sweep(sweep_dir: Path) -> List[Path]:
 
 def main(argv: List[str]) -> List[Path]:
     """A run dir gets report.png; a multirun (sweep) dir gets sweep_report.{png,md,csv}."""
+    usage = "python -m ppo_torchrl.report <run dir or sweep dir>"
+    if "--help" in argv or "-h" in argv:
+        from ppo_torchrl.cli import print_help
+
+        print_help(usage, {"<run dir or sweep dir>": ("a run dir gets report.png, a sweep (multirun) dir "
+                                                       "sweep_report.png, .md and .csv", None)},
+                   "Plots a run's returns and PPO diagnostics against frames, or a sweep's return curves (mean and\n"
+                   "95% CI over seeds) and final returns per group of runs that differ only in seed.")
     if len(argv) != 1:
-        raise ConfigError("usage: python -m ppo_torchrl.report <run dir or sweep dir>")
+        raise ConfigError(f"usage: {usage}")
     target = Path(argv[0])
     if not target.is_dir():
         raise ConfigError(f"{target} is not a directory")

@@ -5,6 +5,7 @@ import pickle
 
 import cloudpickle
 import pytest
+from omegaconf import OmegaConf
 
 from ppo_torchrl import report
 from ppo_torchrl.trainer import Trainer
@@ -34,18 +35,42 @@ def test_joblib_multirun_runs_every_seed_in_parallel_and_the_report_summarizes_t
     assert csv.read_text().splitlines()[1].split(",")[1] == "1 2 3"
 
 
-def test_optuna_search_runs_trials_and_prints_the_best(tmp_path):
+def test_optuna_search_runs_trials_and_prints_the_best(tmp_path, capsys):
     storage = f"sqlite:///{tmp_path / 'study.db'}"
-    result = run_cli("-m", "hparams_search=optuna", "env=InvertedPendulum-v4", "hydra.sweeper.n_trials=2", *TINY,
-                     f"hydra.sweeper.storage={storage}", f"hydra.sweep.dir={tmp_path / 'sweep'}")
+    args = ["hparams_search=optuna", "env=InvertedPendulum-v4", "hydra.sweeper.n_trials=2", *TINY,
+            f"hydra.sweeper.storage={storage}"]
+    result = run_cli("-m", *args, f"hydra.sweep.dir={tmp_path / 'sweep'}")
     assert result.returncode == 0, result.stderr[-2000:]
+    name = "optuna_InvertedPendulum-v4_512frames"  # the search file, the env, the frame budget
+    assert result.stderr.splitlines()[0] == f"optuna: new study {name} in {storage}"
     out = result.stdout + result.stderr
     assert "Best parameters" in out and "Best value" in out
     assert len(list((tmp_path / "sweep").glob("*/summary.json"))) == 2
     import optuna
 
-    study = optuna.load_study(study_name="ppo_InvertedPendulum-v4", storage=storage)
-    assert len(study.trials) == 2  # stored: running the command again resumes this study
+    study = optuna.load_study(study_name=name, storage=storage)
+    assert len(study.trials) == 2  # stored: running the command again resumes this study, and says so
+    from ppo_torchrl.__main__ import announce_study
+
+    announce_study(compose_config(args, return_hydra_config=True))
+    assert capsys.readouterr().err == f"optuna: resuming study {name} with 2 trials in {storage}\n"
+
+
+def test_optuna_study_name_holds_what_defines_the_search():
+    def sweeper(*overrides):
+        cfg = compose_config(["env=InvertedPendulum-v4", *overrides], return_hydra_config=True)
+        return cfg.hydra.sweeper.study_name, cfg.hydra.sweeper.storage, cfg.hydra.sweep.dir
+
+    name, storage, sweep_dir = sweeper("hparams_search=optuna", "collector.total_frames=512")
+    assert name == "optuna_InvertedPendulum-v4_512frames"
+    assert sweeper("hparams_search=optuna", "collector.total_frames=1024")[0] == "optuna_InvertedPendulum-v4_1024frames"
+    assert sweeper("hparams_search=optuna_levers", "collector.total_frames=512")[0] == \
+        "optuna_levers_InvertedPendulum-v4_512frames"
+    assert sweeper("hparams_search=optuna", "collector.total_frames=512", "hparams_search_name=smoke")[0] == \
+        "optuna_InvertedPendulum-v4_512frames_smoke"
+    # one folder per study: the sqlite file beside the sweep dir of each command that adds trials
+    assert storage == f"sqlite:///outputs/multirun/{name}/optuna.db"
+    assert sweep_dir.startswith(f"outputs/multirun/{name}/20")
 
 
 @pytest.mark.parametrize("launcher", ["joblib", "submitit_slurm", "submitit_local", "ray"])
@@ -54,6 +79,28 @@ def test_launcher_configs_compose(launcher):
         pytest.importorskip("hydra_plugins.hydra_ray_launcher", reason="the [ray] extra is not installed")
     cfg = compose_config([f"hydra/launcher={launcher}"], return_hydra_config=True)
     assert "Launcher" in cfg.hydra.launcher._target_
+
+
+def test_multirun_dry_run_shows_the_launcher_the_jobs_and_the_first_jobs_config(tmp_path):
+    # Hydra alone refuses -m with --cfg ("Only one of --run, --multirun, --cfg, --info ... can be specified")
+    args = ["-m", "seed=1,2", "env=Hopper-v4,Walker2d-v4", "hydra/launcher=submitit_slurm",
+            "hydra.launcher.partition=gpu"]
+    result = run_cli(*args, "--cfg", "hydra", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr[-2000:]
+    lines = result.stdout.splitlines()
+    assert lines[0].startswith("# dry run of -m: launcher hydra_plugins.hydra_submitit_launcher.submitit_launcher."
+                               "SlurmLauncher, sweep dir outputs/multirun/")
+    assert lines[1:7] == ["# 4 jobs:", "#   #0 : seed=1 env=Hopper-v4", "#   #1 : seed=1 env=Walker2d-v4",
+                          "#   #2 : seed=2 env=Hopper-v4", "#   #3 : seed=2 env=Walker2d-v4", "# job #0:"]
+    hydra_cfg = OmegaConf.create(result.stdout).hydra  # the lines above are YAML comments
+    assert hydra_cfg.launcher.partition == "gpu" and hydra_cfg.mode == "MULTIRUN"
+    assert hydra_cfg.overrides.task == ["seed=1", "env=Hopper-v4"]
+
+    job = run_cli(*args, "--cfg", "job", cwd=tmp_path)
+    assert job.returncode == 0, job.stderr[-2000:]
+    cfg = OmegaConf.create(job.stdout)
+    assert (cfg.seed, cfg.env.id) == (1, "Hopper-v4")
+    assert list(tmp_path.iterdir()) == []  # nothing ran, nothing was written
 
 
 def test_the_job_function_pickles():

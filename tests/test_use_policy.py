@@ -1,16 +1,19 @@
 """Evaluate, video, export, loggers, progress and report on real short runs."""
 
 import json
+import re
 import subprocess
 import sys
 
 import pytest
 import torch
+from matplotlib.container import ErrorbarContainer
 from tensordict import TensorDict
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
 from ppo_torchrl import export, report
 from ppo_torchrl.checkpoint import load_policy
+from ppo_torchrl.evaluate import EpisodeProgress, evaluate_policy
 from ppo_torchrl.loggers import Progress
 from ppo_torchrl.trainer import Trainer
 
@@ -39,11 +42,30 @@ def test_evaluate_cli_writes_json_and_video(trained_run):
     result = run_cli(f"run={trained_run}", "episodes=2", "video=true", module="ppo_torchrl.evaluate")
     assert result.returncode == 0, result.stderr[-2000:]
     assert "return" in result.stdout and "+-" in result.stdout
+    assert re.search(r"^eval: 1/2 episodes, \d+ s elapsed, ETA \d+ s$", result.stderr, re.M)  # progress, off a TTY
     data = json.loads((trained_run / "eval" / "eval.json").read_text())
     assert len(data["returns"]) == 2 and data["episodes"] == 2 and data["checkpoint"] == "best"
     video = trained_run / "eval" / "best.mp4"
     assert video.stat().st_size > 1000
     assert video.read_bytes()[4:8] == b"ftyp"  # an mp4 container
+
+
+def test_eval_progress_only_when_asked_or_slow(trained_run, capsys):
+    cfg, ac, state = load_policy(trained_run, "last")
+    evaluate_policy(cfg, ac, state["normalization"]["obs"], 2, seed=0)  # as training calls it: a short eval is silent
+    assert capsys.readouterr().err == ""
+    evaluate_policy(cfg, ac, state["normalization"]["obs"], 2, seed=0, progress=True)
+    lines = capsys.readouterr().err.splitlines()  # after the first episode, then at most every 10 s
+    assert len(lines) == 1 and re.fullmatch(r"eval: 1/2 episodes, \d+ s elapsed, ETA \d+ s", lines[0])
+
+    slow = EpisodeProgress(4, progress=None, tty=False)
+    slow.start -= 6  # an eval running for 6 s already: past the quiet period, so it reports
+    slow.update(1)
+    assert capsys.readouterr().err == "eval: 1/4 episodes, 6 s elapsed, ETA 18 s\n"
+    terminal = EpisodeProgress(2, progress=True, tty=True)
+    terminal.update(1)
+    terminal.update(2)  # one updating line, erased when the eval ends
+    assert capsys.readouterr().err == "\reval: 1/2 episodes, 0 s elapsed, ETA 0 s\r\x1b[K"
 
 
 def test_evaluate_bad_input_is_one_line(trained_run):
@@ -125,3 +147,29 @@ def test_progress_plain_lines_off_a_terminal(capsys):
 def test_report_png(trained_run):
     out = report.main([str(trained_run)])[0]
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and out.stat().st_size > 20_000
+
+
+def test_report_marks_each_eval_and_says_what_each_train_curve_averages(tmp_path):
+    # InvertedPendulum-like: short episodes first, then 1000-step ones, two per iteration; one eval
+    (tmp_path / "metrics.csv").write_text(
+        "iteration,frames,train/episodes,train/episode_return,train/return_last100,eval/return_mean,eval/return_std\n"
+        "1,2048,90,10.0,10.0,,\n"
+        "2,4096,8,200.0,25.0,,\n"
+        "3,6144,2,1000.0,44.0,950.0,30.0\n")
+    fig = report.run_figure(tmp_path)
+    ax = fig.axes[0]
+    [eval_bars] = [c for c in ax.containers if isinstance(c, ErrorbarContainer)]
+    point = eval_bars.lines[0]
+    assert point.get_marker() == "o" and point.get_linestyle() == "None"  # a marker, no connecting line
+    assert (list(point.get_xdata()), list(point.get_ydata())) == ([6144], [950])
+    assert eval_bars.lines[2][0].get_segments()[0][:, 1].tolist() == [920, 980]  # its +- std bar
+    assert [t.get_text() for t in ax.get_legend().get_texts()] == [
+        "train: mean of the episodes finished in each iteration",
+        "train: mean of the last 100 finished episodes (at the end they span the last 6,144 frames, so it lags)",
+        "eval: deterministic, mean +- std over its episodes",
+    ]
+    import matplotlib.pyplot as plt  # after run_figure chose the Agg backend
+
+    plt.close(fig)
+    assert report.plot_run(tmp_path).read_bytes()[:4] == b"\x89PNG"
+
