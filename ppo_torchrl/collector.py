@@ -21,12 +21,13 @@ import numpy as np
 import torch
 from tensordict import TensorDict
 from torchrl.collectors import Collector
-from torchrl.envs import ObservationNorm
+from torchrl.envs import ObservationNorm, VecNormV2  # VecNorm(new_api=True) builds a VecNormV2
 
-from ppo_torchrl.envs import get_env_state, make_gym_env, make_torchrl_env, set_env_state, torchrl_obs_stats
+from ppo_torchrl.envs import (get_env_state, make_gym_env, make_torchrl_env, observation_norm, set_env_state,
+                              torchrl_obs_stats)
 from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.models import ActorCritic, NumpyPolicy
-from ppo_torchrl.normalization import ObservationNormalizer, ReturnNormalization, ReturnNormalizer, clip
+from ppo_torchrl.normalization import ObservationNormalizer, ReturnNormalization, ReturnNormalizer, clip, obs_scale
 
 BACKENDS = ("fast", "torchrl")
 
@@ -103,19 +104,17 @@ class FastCollector:
                     reset_rows.append((i, env.reset()[0]))
             self._episode_return += reward
             self._episode_length += 1
-            # The stats see what the policy sees next: the reset observation where an episode ended.
-            policy_raw = raw_next
+            # The stats see every observation the env emits, as VecNorm does on the TorchRL path: each
+            # step's next observation (a final one too), then the reset observation where an episode ended.
+            next_obs = self.obs_norm(raw_next)
+            obs = next_obs
             if reset_rows:
-                policy_raw = raw_next.copy()
+                obs = next_obs.copy()
                 for i, first in reset_rows:
-                    policy_raw[i] = first
+                    obs[i] = self.obs_norm(first[None])[0]
                     self._finished.append((float(self._episode_return[i]), int(self._episode_length[i])))
                     self._episode_return[i] = 0.0
                     self._episode_length[i] = 0
-            if self.obs_norm.enabled:
-                self.obs_norm.stats.update(policy_raw)
-            next_obs = self.obs_norm(raw_next, update=False)
-            obs = next_obs if not reset_rows else self.obs_norm(policy_raw, update=False)
             next_buf[t] = next_obs
             rew_buf[t] = self._scale_rewards(reward, term_buf[t] | trunc_buf[t])
         self._obs = obs
@@ -195,6 +194,7 @@ class TorchRLCollector:
         self.env = make_torchrl_env(cfg.env, clip_actions=ac.head == "normal", gamma=cfg.advantage.gamma,
                                     train=True, device="cpu", num_envs=cfg.collector.num_envs)
         self.env.set_seed(seed)
+        self.epsilon = cfg.env.transforms.norm_epsilon
         self.collector = Collector(
             self.env,
             ac.actor,
@@ -206,12 +206,15 @@ class TorchRLCollector:
         )
         self._iterator = iter(self.collector)
         self._finished: List[Tuple[float, int]] = []
+        self.obs_norm = observation_norm(self.env)
+        self._seen = cfg.collector.num_envs  # observations the normalizer has seen: the first resets
 
     def collect(self) -> TensorDict:
         batch = next(self._iterator)
         if batch.ndim == 1:  # one env: [steps] -> [1, steps]; batched envs come as [num_envs, steps]
             batch = batch.unsqueeze(0)
         done = batch.get(("next", "done")).squeeze(-1)
+        self._seen += batch.numel() + int(done.sum())  # each step's observation, and each reset's
         returns = batch.get(("next", "episode_reward"))[done].reshape(-1).tolist()
         lengths = batch.get(("next", "step_count"))[done].reshape(-1).tolist()
         self._finished += list(zip(returns, lengths))
@@ -227,22 +230,25 @@ class TorchRLCollector:
         return next((t for t in self.env.transform if isinstance(t, ReturnNormalization)), None)
 
     def obs_stats(self) -> Optional[dict]:
-        return torchrl_obs_stats(self.env)
+        return torchrl_obs_stats(self.obs_norm, self._seen)
 
     def state_dict(self) -> dict:
+        """The stats in the shared format, and VecNorm's own state_dict for an exact resume."""
         rn = self._return_norm()
-        return {"obs": self.obs_stats(), "return": rn.normalizer.stats.state_dict() if rn else None}
+        return {"obs": self.obs_stats(), "return": rn.normalizer.stats.state_dict() if rn else None,
+                "vecnorm": self.obs_norm.state_dict() if isinstance(self.obs_norm, VecNormV2) else None}
 
     def load_state_dict(self, state: dict) -> None:
         obs = state.get("obs")
-        for t in self.env.transform:
-            if obs is not None and isinstance(t, ObservationNorm):
-                t.loc.copy_(torch.as_tensor(obs["mean"]))
-                t.scale.copy_(torch.as_tensor(np.sqrt(obs["var"])))
-            elif obs is not None and getattr(t, "_loc", None) is not None:
-                t._loc["observation"].copy_(torch.as_tensor(obs["mean"]))
-                t._var["observation"].copy_(torch.as_tensor(obs["var"]))
-                t._count["observation"].fill_(int(obs["count"]))
+        if isinstance(self.obs_norm, VecNormV2) and state.get("vecnorm") is not None:
+            self.obs_norm.load_state_dict(state["vecnorm"])
+            self._seen = int(obs["count"]) if obs else self._seen
+        elif isinstance(self.obs_norm, VecNormV2) and obs is not None:
+            raise ConfigError("these observation statistics come from a collector.backend=fast run; VecNorm "
+                              "(collector.backend=torchrl) can only continue its own: use the same backend")
+        elif isinstance(self.obs_norm, ObservationNorm) and obs is not None:
+            self.obs_norm.loc.copy_(torch.as_tensor(obs["mean"]))
+            self.obs_norm.scale.copy_(torch.as_tensor(obs_scale(obs["var"], self.epsilon)))
         rn = self._return_norm()
         if rn is not None and state.get("return") is not None:
             rn.normalizer.stats.load_state_dict(state["return"])

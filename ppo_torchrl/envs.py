@@ -31,10 +31,11 @@ from torchrl.envs import (
     Transform,
     TransformedEnv,
     VecNorm,
+    VecNormV2,
 )
 
 from ppo_torchrl.errors import ConfigError
-from ppo_torchrl.normalization import ReturnNormalization
+from ppo_torchrl.normalization import ReturnNormalization, obs_scale
 
 # Gymnasium's v4 MuJoCo envs warn on every make that v5 exists; the warning is not actionable here.
 warnings.filterwarnings("ignore", message=".*is out of date.*")
@@ -250,7 +251,7 @@ def make_torchrl_env(
         spec = base.action_spec
         transforms.append(ClipActionToBounds(spec.space.low, spec.space.high))
     # RewardSum and StepCounter see raw rewards: logged returns are never the normalized ones.
-    transforms += [DoubleToFloat(), RewardSum(), StepCounter()]
+    transforms += [RewardSum(), StepCounter()]
     obs_norm = None
     if t.obs_norm == "running" and train:
         obs_norm = VecNorm(in_keys=["observation"], decay=1.0, eps=t.norm_epsilon, new_api=True,
@@ -261,10 +262,11 @@ def make_torchrl_env(
         if obs_stats is None:
             raise ValueError("a frozen observation normalization needs obs_stats")
         obs_norm = frozen_observation_norm(obs_stats, t.norm_epsilon)
-    if obs_norm is not None:
+    if obs_norm is not None:  # on the float64 observations: the statistics are kept in float64
         transforms.append(obs_norm)
         if t.obs_clip is not None:
             transforms.append(ClipTransform(in_keys=["observation"], low=-t.obs_clip, high=t.obs_clip))
+    transforms.append(DoubleToFloat())
     if train:
         if t.reward_norm == "return":
             transforms.append(ReturnNormalization(gamma=gamma, clip=None, num_envs=num_envs, epsilon=t.norm_epsilon))
@@ -294,24 +296,26 @@ class ClipActionToBounds(Transform):
 
 
 def frozen_observation_norm(obs_stats: dict, epsilon: float) -> ObservationNorm:
-    loc = torch.as_tensor(obs_stats["mean"], dtype=torch.float32)
-    scale = torch.as_tensor(np.sqrt(np.asarray(obs_stats["var"]) + epsilon), dtype=torch.float32)
+    """The stats of a checkpoint ({"mean", "var", "count"}) as a fixed TorchRL ObservationNorm."""
+    loc = torch.as_tensor(np.asarray(obs_stats["mean"]), dtype=torch.float64)
+    scale = torch.as_tensor(obs_scale(obs_stats["var"], epsilon), dtype=torch.float64)
     return ObservationNorm(loc=loc, scale=scale, in_keys=["observation"], standard_normal=True)
 
 
-def torchrl_obs_stats(env: TransformedEnv) -> Optional[dict]:
-    """Observation statistics of a training TransformedEnv in the checkpoint's format."""
-    for transform in env.transform:
-        if isinstance(transform, ObservationNorm):
-            scale = transform.scale.detach().double().numpy()
-            return {"mean": transform.loc.detach().double().numpy(), "var": scale**2, "count": 0.0}
-        if hasattr(transform, "_loc") and getattr(transform, "_loc", None) is not None:
-            return {
-                "mean": transform._loc["observation"].double().numpy().copy(),
-                "var": transform._var["observation"].double().numpy().copy(),
-                "count": float(transform._count["observation"]),
-            }
-    return None
+def observation_norm(env: TransformedEnv):
+    """The env's observation normalizer (VecNorm or ObservationNorm), or None."""
+    return next((t for t in env.transform if isinstance(t, (VecNormV2, ObservationNorm))), None)
+
+
+def torchrl_obs_stats(norm, count: float) -> Optional[dict]:
+    """Its statistics in the checkpoint's format, read through the public `loc` / `scale`."""
+    if norm is None or (isinstance(norm, VecNormV2) and not norm.initialized):
+        return None
+    loc, scale = norm.loc, norm.scale
+    if isinstance(norm, VecNormV2):  # TensorDicts keyed like the in_keys
+        loc, scale = loc["observation"], scale["observation"]
+    scale = scale.detach().double().numpy()
+    return {"mean": loc.detach().double().numpy().copy(), "var": scale**2, "count": float(count)}
 
 
 def seed_everything(seed: int) -> None:

@@ -19,6 +19,7 @@ import torch
 from torch import nn
 
 from ppo_torchrl.models import ActorCritic
+from ppo_torchrl.normalization import obs_scale
 
 
 class DeployedPolicy(nn.Module):
@@ -30,7 +31,7 @@ class DeployedPolicy(nn.Module):
         self.policy_net = copy.deepcopy(ac.policy_net).cpu().requires_grad_(False)
         obs_dim = ac.policy_net[0][0].in_features
         mean = np.zeros(obs_dim) if obs_stats is None else np.asarray(obs_stats["mean"])
-        std = np.ones(obs_dim) if obs_stats is None else np.sqrt(np.asarray(obs_stats["var"]) + epsilon)
+        std = np.ones(obs_dim) if obs_stats is None else obs_scale(obs_stats["var"], epsilon)
         self.register_buffer("obs_mean", torch.as_tensor(mean, dtype=torch.float32))
         self.register_buffer("obs_std", torch.as_tensor(std, dtype=torch.float32))
         clip = float(obs_clip) if obs_stats is not None and obs_clip is not None else float("inf")

@@ -1,9 +1,14 @@
 """Running statistics for observation and reward normalization.
 
-One implementation of the math serves the fast collector (called with numpy arrays every step) and
-the TorchRL pipeline (`ReturnNormalization` below is a TorchRL `Transform` around the same class).
-The update rule is the parallel mean/variance merge used by SB3's VecNormalize and gymnasium's
-NormalizeObservation/NormalizeReward, so a checkpoint's statistics mean the same thing everywhere.
+Observations: the TorchRL pipeline normalizes with TorchRL's `VecNorm` (decay 1: the exact running
+mean and variance of every observation the env emits, reset observations included, with the std
+floored at `eps`); the fast collector computes the same numbers in numpy (`ObservationNormalizer`,
+no prior count). Both report `{"mean", "var", "count"}`, the one format checkpoints, evaluation,
+export and init_from read, and `obs_scale` is the one formula that turns it into a scale.
+
+Rewards: TorchRL has no return-based scaling, so `ReturnNormalization` below is a TorchRL
+`Transform` around `ReturnNormalizer`, which the fast collector calls directly: the same code on
+both paths (SB3 VecNormalize's rule, with its prior count).
 """
 
 from __future__ import annotations
@@ -16,6 +21,11 @@ from tensordict import TensorDictBase
 from torchrl.envs.transforms import Transform
 
 
+def obs_scale(var, epsilon: float):
+    """The std a normalizer divides by: sqrt(var) floored at epsilon, as VecNorm does."""
+    return np.maximum(np.sqrt(np.asarray(var, np.float64)), epsilon)
+
+
 def clip(x: np.ndarray, bound: Optional[float]) -> np.ndarray:
     """Clip to [-bound, bound]; None leaves x as it is."""
     return x if bound is None else np.clip(x, -bound, bound)
@@ -24,10 +34,12 @@ def clip(x: np.ndarray, bound: Optional[float]) -> np.ndarray:
 class RunningMeanStd:
     """Mean and variance of a stream of vectors, merged batch by batch."""
 
-    def __init__(self, shape: tuple = (), epsilon: float = 1e-4):
+    def __init__(self, shape: tuple = (), prior_count: float = 1e-4):
+        # prior_count > 0 (SB3): the stats start as mean 0, var 1 seen prior_count times, which avoids
+        # a division by zero before the first update; 0: the exact mean and variance of what was seen.
         self.mean = np.zeros(shape, np.float64)
-        self.var = np.ones(shape, np.float64)
-        self.count = epsilon  # as SB3: avoids a division by zero before the first update
+        self.var = np.ones(shape, np.float64) if prior_count else np.zeros(shape, np.float64)
+        self.count = prior_count
         self.frozen = False
 
     def update(self, batch: np.ndarray) -> None:
@@ -58,10 +70,11 @@ class RunningMeanStd:
 
 
 class ObservationNormalizer:
-    """(obs - mean) / sqrt(var + eps), clipped; stats update on every observation unless frozen."""
+    """(obs - mean) / max(std, eps), clipped, as TorchRL's VecNorm(decay=1) and ClipTransform do;
+    stats update on every observation unless frozen."""
 
     def __init__(self, shape: tuple, clip: Optional[float], epsilon: float = 1e-8, enabled: bool = True):
-        self.stats = RunningMeanStd(shape)
+        self.stats = RunningMeanStd(shape, prior_count=0.0)
         self.clip = clip
         self.epsilon = epsilon
         self.enabled = enabled
@@ -71,7 +84,7 @@ class ObservationNormalizer:
             return obs.astype(np.float32)
         if update:
             self.stats.update(obs)
-        out = (obs - self.stats.mean) / np.sqrt(self.stats.var + self.epsilon)
+        out = (obs - self.stats.mean) / obs_scale(self.stats.var, self.epsilon)
         return clip(out, self.clip).astype(np.float32)
 
 

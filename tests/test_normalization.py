@@ -5,14 +5,14 @@ from ppo_torchrl.normalization import ReturnNormalizer, RunningMeanStd
 
 def test_running_stats_match_numpy_whatever_the_batching():
     data = np.random.default_rng(0).normal(3.0, 2.0, size=(500, 4))
-    one_by_one, in_chunks = RunningMeanStd((4,)), RunningMeanStd((4,))
+    one_by_one, in_chunks = RunningMeanStd((4,), prior_count=0), RunningMeanStd((4,), prior_count=0)
     for row in data:
         one_by_one.update(row[None])
     for chunk in np.split(data, 10):
         in_chunks.update(chunk)
     for stats in (one_by_one, in_chunks):
         np.testing.assert_allclose(stats.mean, data.mean(0), rtol=1e-6)
-        np.testing.assert_allclose(stats.var, data.var(0), rtol=1e-4)  # the 1e-4 prior count
+        np.testing.assert_allclose(stats.var, data.var(0), rtol=1e-9)  # exact: no prior count
     frozen = RunningMeanStd((4,))
     frozen.frozen = True
     frozen.update(data)
@@ -27,3 +27,41 @@ def test_return_normalizer_scales_by_discounted_return_std_and_resets_on_done():
     np.testing.assert_allclose(norm.stats.mean, (1.0 + 1.5) / 2, rtol=1e-3)
     scaled = norm.scale(np.array([2.0]))
     np.testing.assert_allclose(scaled, 2.0 / np.sqrt(norm.stats.var + 1e-8))
+
+
+def test_both_backends_normalizers_give_numpys_mean_and_var_of_the_same_stream():
+    """A real Hopper-v4 stream (random actions, resets included) through TorchRL's VecNorm, as the
+    torchrl backend runs it, and through the fast collector's normalizer: both equal numpy's."""
+    import torch
+    from torchrl.envs import RenameTransform
+
+    from ppo_torchrl.envs import make_torchrl_env, observation_norm, torchrl_obs_stats
+    from ppo_torchrl.normalization import ObservationNormalizer, obs_scale
+
+    from conftest import compose_config
+
+    cfg = compose_config(["env=gym", "env.id=Hopper-v4", "env.max_episode_steps=50"])
+    env = make_torchrl_env(cfg.env, clip_actions=True, gamma=0.99)
+    # a copy of the raw observation ahead of the normalizer: the stream it sees
+    env.insert_transform(0, RenameTransform(["observation"], ["raw"], create_copy=True))
+    env.set_seed(0)
+    torch.manual_seed(0)
+    rollout = env.rollout(2000, break_when_any_done=False)
+    raw, nxt, done = rollout["raw"], rollout["next", "raw"], rollout["next", "done"].squeeze(-1)
+    stream = [raw[0]]  # the first reset, then each step's next observation and each reset's
+    for t in range(len(rollout)):
+        stream.append(nxt[t])
+        if done[t] and t + 1 < len(rollout):
+            stream.append(raw[t + 1])
+    stream = torch.stack(stream).double().numpy()
+    assert done.sum() >= 20 and stream.shape[0] == 1 + 2000 + int(done[:-1].sum())
+
+    vecnorm = torchrl_obs_stats(observation_norm(env), count=len(stream))
+    fast = ObservationNormalizer((stream.shape[1],), clip=None)
+    for row in stream:
+        fast(row[None])
+    for stats in (vecnorm, fast.stats.state_dict()):
+        np.testing.assert_allclose(stats["mean"], stream.mean(0), rtol=1e-6)
+        np.testing.assert_allclose(stats["var"], stream.var(0), rtol=1e-6)
+    # and the same scale on both paths
+    np.testing.assert_allclose(obs_scale(fast.stats.var, 1e-8), np.sqrt(vecnorm["var"]), rtol=1e-6)
