@@ -29,6 +29,11 @@ class TransformsConfig:
     obs_clip: Optional[float] = 10.0  # clip normalized observations to [-obs_clip, obs_clip]
     reward_clip: Optional[float] = 10.0  # clip normalized rewards to [-reward_clip, reward_clip]
     norm_epsilon: float = 1e-8
+    # Your own TorchRL transforms: Hydra `_target_` entries, instantiated and appended (after the
+    # normalization, before the reward scaling) to the training and the evaluation TransformedEnv, e.g.
+    # '[{_target_: torchrl.envs.CatFrames, N: 3, dim: -1, in_keys: [observation]}]'. They need
+    # collector.backend=torchrl (auto picks it); a changed observation size reaches the networks.
+    extra: List[Any] = field(default_factory=list)
 
 
 @dataclass
@@ -132,9 +137,10 @@ class CollectorConfig:
     frames_per_batch: int = 2048
     total_frames: int = 1_000_000
     num_envs: int = 1
-    # fast: in-process gymnasium envs stepped by a lean loop that writes TorchRL-layout batches;
-    # torchrl: torchrl.collectors.Collector over TransformedEnv(GymWrapper). Same algorithm, same keys.
-    backend: str = "fast"
+    # torchrl: torchrl.collectors.Collector over TransformedEnv(GymWrapper), the reference pipeline;
+    # fast: the same pipeline's math in a lean numpy loop over the same gymnasium envs (same batch keys,
+    # same statistics); auto: fast unless env.transforms.extra asks for TorchRL transforms.
+    backend: str = "auto"
 
 
 @dataclass

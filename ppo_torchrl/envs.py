@@ -205,10 +205,46 @@ def _ctrl_bounds_from_force(env: gym.Env, info: MjcfInfo) -> None:
     env.unwrapped._set_action_space()
 
 
+def extra_transforms(env_cfg) -> list:
+    """env.transforms.extra, instantiated: `_target_` entries naming TorchRL `Transform` classes."""
+    from hydra.errors import InstantiationException
+    from hydra.utils import instantiate
+
+    built = []
+    for i, entry in enumerate(env_cfg.transforms.extra or []):
+        where = f"env.transforms.extra[{i}]"
+        target = entry.get("_target_") if hasattr(entry, "get") else None
+        if not target:
+            raise ConfigError(f"{where}={entry} needs a _target_ naming a TorchRL transform class, e.g. "
+                              "{_target_: torchrl.envs.CatFrames, N: 3, dim: -1, in_keys: [observation]}")
+        try:
+            transform = instantiate(entry)
+        except (InstantiationException, TypeError, ValueError, ImportError) as exc:
+            detail = " ".join(str(exc.__cause__ or exc).split())[:300]
+            raise ConfigError(f"{where} ({target}) cannot be built: {detail}") from None
+        if not isinstance(transform, Transform):
+            raise ConfigError(f"{where} ({target}) is a {type(transform).__name__}, not a TorchRL Transform")
+        built.append(transform)
+    return built
+
+
 def env_spec(env_cfg) -> EnvSpec:
     env = make_gym_env(env_cfg)
+    if env_cfg.transforms.extra:  # the observation the networks see is the transformed one
+        torchrl_env = make_torchrl_env(env_cfg, clip_actions=False, gamma=0.99)
+        try:
+            obs_shape = torchrl_env.observation_spec["observation"].shape
+            torchrl_env.rollout(2)  # a transform that fails on real data fails here, not after hours
+        except Exception as exc:  # noqa: BLE001 - a user's transform can fail in any way
+            raise ConfigError(f"env.transforms.extra does not run on {env_cfg.id}: {type(exc).__name__}: "
+                              f"{str(exc).strip().splitlines()[0] if str(exc).strip() else ''}") from None
+        finally:
+            torchrl_env.close()
+        if len(obs_shape) != 1:
+            raise ConfigError(f"env.transforms.extra makes observations of shape {tuple(obs_shape)}; the networks "
+                              "need a flat vector (use dim=-1)")
     spec = EnvSpec(
-        obs_dim=int(env.observation_space.shape[0]),
+        obs_dim=int(obs_shape[0]) if env_cfg.transforms.extra else int(env.observation_space.shape[0]),
         action_dim=int(env.action_space.shape[0]),
         action_low=env.action_space.low.astype(np.float32),
         action_high=env.action_space.high.astype(np.float32),
@@ -267,6 +303,7 @@ def make_torchrl_env(
         if t.obs_clip is not None:
             transforms.append(ClipTransform(in_keys=["observation"], low=-t.obs_clip, high=t.obs_clip))
     transforms.append(DoubleToFloat())
+    transforms += extra_transforms(env_cfg)
     if train:
         if t.reward_norm == "return":
             transforms.append(ReturnNormalization(gamma=gamma, clip=None, num_envs=num_envs, epsilon=t.norm_epsilon))

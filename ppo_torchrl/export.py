@@ -18,6 +18,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.models import ActorCritic
 from ppo_torchrl.normalization import obs_scale
 
@@ -50,6 +51,10 @@ class DeployedPolicy(nn.Module):
 
 def export_policy(cfg, ac: ActorCritic, obs_stats: Optional[dict], path: Path) -> Path:
     t = cfg.env.transforms
+    if t.extra:  # a user's TorchRL transform (CatFrames keeps a frame buffer) cannot be baked in here
+        target = t.extra[0].get("_target_", "?")
+        raise ConfigError(f"export: env.transforms.extra[0] ({target}) cannot be baked into policy.pt; "
+                          "export supports the built-in normalization and clipping only")
     module = DeployedPolicy(ac, obs_stats, t.obs_clip, t.norm_epsilon).eval()
     example = torch.zeros(2, module.obs_mean.shape[0])
     with torch.no_grad():

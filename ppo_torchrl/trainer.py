@@ -22,7 +22,7 @@ from tensordict import TensorDict
 from ppo_torchrl import checkpoint
 from ppo_torchrl.advantage import explained_variance, make_advantage
 from ppo_torchrl.checkpoint import CheckpointManager, check_spec
-from ppo_torchrl.collector import make_collector
+from ppo_torchrl.collectors import make_collector
 from ppo_torchrl.envs import env_label, seed_everything
 from ppo_torchrl.errors import ConfigError, Interrupted, TrainingError
 from ppo_torchrl.evaluate import evaluate_policy

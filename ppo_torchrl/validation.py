@@ -25,7 +25,7 @@ def one_of(name: str, value, choices) -> tuple:
 def validate_config(cfg):
     """Raise ConfigError naming the first bad value; return the env's spec (shapes and bounds)."""
     from ppo_torchrl.advantage import ESTIMATORS
-    from ppo_torchrl.collector import BACKENDS
+    from ppo_torchrl.collectors import CHOICES, resolve_backend
     from ppo_torchrl.envs import env_spec
     from ppo_torchrl.loggers import LOGGERS
     from ppo_torchrl.losses import LOSSES, OPTIMIZERS, NOT_COMPILABLE
@@ -47,7 +47,7 @@ def validate_config(cfg):
          f"collector.frames_per_batch={c.frames_per_batch} must be divisible by collector.num_envs={c.num_envs}"),
         (c.total_frames >= c.frames_per_batch,
          f"collector.total_frames={c.total_frames} must be >= collector.frames_per_batch={c.frames_per_batch}"),
-        one_of("collector.backend", c.backend, BACKENDS),
+        one_of("collector.backend", c.backend, CHOICES),
         one_of("compile", compile_choice, COMPILE_CHOICES),
         (not (compile_choice == "true" and loss.name in NOT_COMPILABLE),
          f"compile=true does not work with loss={loss.name}: {NOT_COMPILABLE.get(loss.name)}; use compile=auto or false"),
@@ -95,6 +95,7 @@ def validate_config(cfg):
         if not ok:
             raise ConfigError(message)
     resolve_device(cfg.device)
+    resolve_backend(cfg)
     validate_policy_config(cfg.policy)
     return env_spec(cfg.env)
 

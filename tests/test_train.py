@@ -5,7 +5,7 @@ import json
 import pytest
 import torch
 
-from ppo_torchrl.collector import FastCollector
+from ppo_torchrl.collectors import FastCollector
 from ppo_torchrl.losses import make_loss_step
 from ppo_torchrl.losses import LOSS_INPUT_KEYS
 from ppo_torchrl.trainer import Trainer, use_compile

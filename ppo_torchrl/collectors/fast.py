@@ -1,16 +1,9 @@
-"""Collectors: each call to `collect()` returns one batch of `frames_per_batch` frames.
+"""The fast backend: the TorchRL pipeline's math in a lean numpy loop over the same Gymnasium envs.
 
-Both backends return a TensorDict of batch size [num_envs, steps] with TorchRL's keys:
-`observation`, `action`, and under `next`: `observation`, `reward`, `done`, `terminated`,
-`truncated`. Observations and rewards are the normalized ones the learner sees; raw episode
-returns and lengths come from `pop_episodes()`.
-
-- `FastCollector` (default) steps Gymnasium's MuJoCo envs in-process with a lean loop: a numpy
-  copy of the policy net (`NumpyPolicy`), numpy normalization, no per-step TensorDict or torch op.
-  The per-step cost is close to the simulator's own.
-- `TorchRLCollector` is the reference pipeline, `torchrl.collectors.Collector` over
-  `TransformedEnv(GymWrapper)`; it is slower per step and kept for users who extend it with
-  TorchRL transforms.
+A numpy copy of the policy net (`NumpyPolicy`) draws each action, observations and rewards are
+normalized in numpy with the same statistics VecNorm and `ReturnNormalization` compute, and there
+is no per-step TensorDict or torch op: the per-step cost is close to the simulator's own. The batch
+it returns has TorchRL's layout and keys.
 """
 
 from __future__ import annotations
@@ -20,16 +13,10 @@ from typing import List, Optional, Tuple
 import numpy as np
 import torch
 from tensordict import TensorDict
-from torchrl.collectors import Collector
-from torchrl.envs import ObservationNorm, VecNormV2  # VecNorm(new_api=True) builds a VecNormV2
 
-from ppo_torchrl.envs import (get_env_state, make_gym_env, make_torchrl_env, observation_norm, set_env_state,
-                              torchrl_obs_stats)
-from ppo_torchrl.errors import ConfigError
+from ppo_torchrl.envs import get_env_state, make_gym_env, set_env_state
 from ppo_torchrl.models import ActorCritic, NumpyPolicy
-from ppo_torchrl.normalization import ObservationNormalizer, ReturnNormalization, ReturnNormalizer, clip, obs_scale
-
-BACKENDS = ("fast", "torchrl")
+from ppo_torchrl.normalization import ObservationNormalizer, ReturnNormalizer, clip
 
 
 class FastCollector:
@@ -185,80 +172,3 @@ class FastCollector:
     def close(self) -> None:
         for env in self.envs:
             env.close()
-
-
-class TorchRLCollector:
-    """`torchrl.collectors.Collector` over `TransformedEnv(GymWrapper)`, same batch layout."""
-
-    def __init__(self, cfg, ac: ActorCritic, seed: int, device: torch.device):
-        self.env = make_torchrl_env(cfg.env, clip_actions=ac.head == "normal", gamma=cfg.advantage.gamma,
-                                    train=True, device="cpu", num_envs=cfg.collector.num_envs)
-        self.env.set_seed(seed)
-        self.epsilon = cfg.env.transforms.norm_epsilon
-        self.collector = Collector(
-            self.env,
-            ac.actor,
-            frames_per_batch=cfg.collector.frames_per_batch,
-            total_frames=-1,
-            policy_device=device,
-            env_device="cpu",
-            storing_device=device,
-        )
-        self._iterator = iter(self.collector)
-        self._finished: List[Tuple[float, int]] = []
-        self.obs_norm = observation_norm(self.env)
-        self._seen = cfg.collector.num_envs  # observations the normalizer has seen: the first resets
-
-    def collect(self) -> TensorDict:
-        batch = next(self._iterator)
-        if batch.ndim == 1:  # one env: [steps] -> [1, steps]; batched envs come as [num_envs, steps]
-            batch = batch.unsqueeze(0)
-        done = batch.get(("next", "done")).squeeze(-1)
-        self._seen += batch.numel() + int(done.sum())  # each step's observation, and each reset's
-        returns = batch.get(("next", "episode_reward"))[done].reshape(-1).tolist()
-        lengths = batch.get(("next", "step_count"))[done].reshape(-1).tolist()
-        self._finished += list(zip(returns, lengths))
-        keys = ["observation", "action", ("next", "observation"), ("next", "reward"), ("next", "done"),
-                ("next", "terminated"), ("next", "truncated")]
-        return batch.select(*keys)
-
-    def pop_episodes(self) -> List[Tuple[float, int]]:
-        finished, self._finished = self._finished, []
-        return finished
-
-    def _return_norm(self) -> Optional[ReturnNormalization]:
-        return next((t for t in self.env.transform if isinstance(t, ReturnNormalization)), None)
-
-    def obs_stats(self) -> Optional[dict]:
-        return torchrl_obs_stats(self.obs_norm, self._seen)
-
-    def state_dict(self) -> dict:
-        """The stats in the shared format, and VecNorm's own state_dict for an exact resume."""
-        rn = self._return_norm()
-        return {"obs": self.obs_stats(), "return": rn.normalizer.stats.state_dict() if rn else None,
-                "vecnorm": self.obs_norm.state_dict() if isinstance(self.obs_norm, VecNormV2) else None}
-
-    def load_state_dict(self, state: dict) -> None:
-        obs = state.get("obs")
-        if isinstance(self.obs_norm, VecNormV2) and state.get("vecnorm") is not None:
-            self.obs_norm.load_state_dict(state["vecnorm"])
-            self._seen = int(obs["count"]) if obs else self._seen
-        elif isinstance(self.obs_norm, VecNormV2) and obs is not None:
-            raise ConfigError("these observation statistics come from a collector.backend=fast run; VecNorm "
-                              "(collector.backend=torchrl) can only continue its own: use the same backend")
-        elif isinstance(self.obs_norm, ObservationNorm) and obs is not None:
-            self.obs_norm.loc.copy_(torch.as_tensor(obs["mean"]))
-            self.obs_norm.scale.copy_(torch.as_tensor(obs_scale(obs["var"], self.epsilon)))
-        rn = self._return_norm()
-        if rn is not None and state.get("return") is not None:
-            rn.normalizer.stats.load_state_dict(state["return"])
-
-    def close(self) -> None:
-        self.collector.shutdown()
-
-
-def make_collector(cfg, ac: ActorCritic, seed: int, device: torch.device):
-    backend = cfg.collector.backend
-    if backend not in BACKENDS:
-        raise ConfigError(f"collector.backend='{backend}' is not known; use one of {', '.join(BACKENDS)}")
-    return (FastCollector if backend == "fast" else TorchRLCollector)(cfg, ac, seed, device)
