@@ -19,7 +19,7 @@ import torch
 from omegaconf import OmegaConf
 from tensordict import TensorDict
 
-from ppo_torchrl import checkpoint
+from ppo_torchrl import checkpoint, startup
 from ppo_torchrl.advantage import explained_variance, make_advantage
 from ppo_torchrl.checkpoint import CheckpointManager, check_spec
 from ppo_torchrl.collector import make_collector
@@ -149,6 +149,8 @@ class Trainer:
         self.metrics = MetricsFile(self.run_dir / "metrics.csv", COLUMNS, append=self.resumed)
         if not self.resumed:  # a resume's overrides reach config.yaml once an iteration has completed
             self.write_config()
+        print(startup.describe_resume(self.run_dir, self.frames, cfg) if self.resumed
+              else startup.describe_start(cfg, startup.command_line()), file=sys.stderr, flush=True)
         batch_frames = cfg.collector.frames_per_batch
         stop = StopRequest()
         self.progress = Progress(self.num_iterations * batch_frames, self.frames, cfg.logger.print_every_s)
