@@ -1,5 +1,9 @@
 """The start-up line (frame budget, what env files and presets change) and resume ergonomics."""
 
+import pytest
+
+from ppo_torchrl.config import resume_config
+from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.startup import describe_start
 
 from conftest import compose_config
@@ -26,3 +30,22 @@ def test_start_line_names_what_the_env_file_changes_but_not_the_command_line():
 def test_start_line_of_an_exact_budget_and_the_defaults():
     line = start_line("env=InvertedPendulum-v4", "collector.total_frames=4096")
     assert line == "start: InvertedPendulum-v4, 2 batches x 2048 = 4,096 frames; the env file/preset changes no defaults"
+
+
+def saved_run(tmp_path):
+    (tmp_path / "config.yaml").write_text("env:\n  id: InvertedPendulum-v4\n")
+    (tmp_path / ".hydra").mkdir()
+    (tmp_path / ".hydra" / "hydra.yaml").write_text(
+        "hydra:\n  runtime:\n    choices:\n      experiment: null\n      logger: csv\n      env: InvertedPendulum-v4\n")
+    return tmp_path
+
+
+def test_resume_accepts_the_runs_own_group_choices(tmp_path):
+    cfg = resume_config(saved_run(tmp_path), ["logger=csv", "env=InvertedPendulum-v4", "collector.total_frames=99"])
+    assert cfg.collector.total_frames == 99 and cfg.logger.name == "csv"
+
+
+@pytest.mark.parametrize("override, saved", [("logger=none", "logger=csv"), ("experiment=aidl_anymal", "experiment=null")])
+def test_resume_refuses_another_group_choice_naming_the_saved_one(tmp_path, override, saved):
+    with pytest.raises(ConfigError, match=f"resume: {override} differs from the run's {saved}"):
+        resume_config(saved_run(tmp_path), [override])
