@@ -1,10 +1,14 @@
 """The start-up line (frame budget, what env files and presets change) and resume ergonomics."""
 
+import time
+
 import pytest
 
+from ppo_torchrl import checkpoint
 from ppo_torchrl.config import resume_config
 from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.startup import describe_start
+from ppo_torchrl.trainer import Trainer
 
 from conftest import compose_config
 
@@ -49,3 +53,20 @@ def test_resume_accepts_the_runs_own_group_choices(tmp_path):
 def test_resume_refuses_another_group_choice_naming_the_saved_one(tmp_path, override, saved):
     with pytest.raises(ConfigError, match=f"resume: {override} differs from the run's {saved}"):
         resume_config(saved_run(tmp_path), [override])
+
+
+def test_resumed_run_says_where_it_resumes_and_its_time_goes_on(tiny_cfg, tmp_path, capsys):
+    first = Trainer(tiny_cfg("collector.total_frames=512"), tmp_path)
+    collect = first.collector.collect
+    first.collector.collect = lambda: (time.sleep(0.5), collect())[1]  # the first part takes >= 1 s
+    first.train()
+    assert capsys.readouterr().err.startswith("start: InvertedPendulum-v4, 2 batches x 256 = 512 frames;")
+    state = checkpoint.load(tmp_path / "checkpoints" / "last.pt")
+    assert state["wall_time"] >= 1.0
+
+    cfg = resume_config(tmp_path, ["collector.total_frames=1000"])
+    summary = Trainer(cfg, tmp_path, resume=state).train()
+    assert capsys.readouterr().err.splitlines()[0] == f"resumed {tmp_path} at frame 512 of 1,024"
+    times = [float(row.split(",")[2]) for row in (tmp_path / "metrics.csv").read_text().splitlines()[1:]]
+    assert len(times) == 4 and times == sorted(times) and times[2] > state["wall_time"]
+    assert summary["wall_s"] >= times[-1]
