@@ -218,16 +218,24 @@ register_configs()
 
 
 def resume_config(run_dir, overrides):
-    """The saved config of `run_dir` with this command's `key=value` overrides applied on top."""
+    """The saved config of `run_dir` with this command's `key=value` overrides applied on top. A group
+    choice (`logger=csv`) is accepted when it is the run's own (`.hydra/hydra.yaml`), refused otherwise."""
     from pathlib import Path
-
-    from omegaconf import OmegaConf
 
     from ppo_torchrl.errors import ConfigError
 
     saved = OmegaConf.load(Path(run_dir) / "config.yaml")
     cfg = OmegaConf.merge(OmegaConf.structured(Config), saved)
+    hydra_file = Path(run_dir) / ".hydra" / "hydra.yaml"
+    choices = OmegaConf.load(hydra_file).hydra.runtime.choices if hydra_file.is_file() else {}
     for override in overrides:
+        group, _, option = override.partition("=")
+        if group in choices:
+            saved_choice = "null" if choices[group] is None else choices[group]
+            if option != saved_choice:
+                raise ConfigError(f"resume: {override} differs from the run's {group}={saved_choice}; a resumed "
+                                  "run keeps its group choices (only key=value overrides apply)")
+            continue
         try:
             cfg = OmegaConf.merge(cfg, OmegaConf.from_dotlist([override]))
         except Exception as exc:

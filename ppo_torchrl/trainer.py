@@ -19,7 +19,7 @@ import torch
 from omegaconf import OmegaConf
 from tensordict import TensorDict
 
-from ppo_torchrl import checkpoint
+from ppo_torchrl import checkpoint, startup
 from ppo_torchrl.advantage import explained_variance, make_advantage
 from ppo_torchrl.checkpoint import CheckpointManager, check_spec
 from ppo_torchrl.collectors import make_collector
@@ -86,6 +86,7 @@ class Trainer:
         self.last_eval: Optional[dict] = None
         self.train_time = 0.0  # seconds spent collecting and updating (what SPS divides by)
         self.start_time = time.perf_counter()
+        self.earlier_wall_time = 0.0  # seconds the run ran before it was resumed
         self.resumed = resume is not None
         if resume is not None:
             self._restore(resume)
@@ -106,6 +107,7 @@ class Trainer:
         self.last_eval = state.get("last_eval")
         self.ckpt.best_return = state.get("best_eval_return")
         self.train_time = state.get("train_time", 0.0)
+        self.earlier_wall_time = state.get("wall_time", 0.0)
         rng = state["rng"]
         torch.set_rng_state(rng["torch"])
         np.random.set_state(rng["numpy"])
@@ -149,6 +151,8 @@ class Trainer:
         self.metrics = MetricsFile(self.run_dir / "metrics.csv", COLUMNS, append=self.resumed)
         if not self.resumed:  # a resume's overrides reach config.yaml once an iteration has completed
             self.write_config()
+        print(startup.describe_resume(self.run_dir, self.frames, cfg) if self.resumed
+              else startup.describe_start(cfg, startup.command_line()), file=sys.stderr, flush=True)
         batch_frames = cfg.collector.frames_per_batch
         stop = StopRequest()
         self.progress = Progress(self.num_iterations * batch_frames, self.frames, cfg.logger.print_every_s)
@@ -187,7 +191,7 @@ class Trainer:
                 row.update(self._evaluate(cfg.eval.final_episodes))
             elif not last and self._crossed(cfg.eval.every_frames):
                 row.update(self._evaluate(cfg.eval.episodes))
-            row["time_s"] = time.perf_counter() - self.start_time
+            row["time_s"] = self.wall_time()
             row["sps"] = self.frames / self.train_time
             self._log(row, last)
             if last or stop.signum is not None or self._crossed(cfg.checkpoint.every_frames):
@@ -325,7 +329,12 @@ class Trainer:
             "best_eval_return": self.ckpt.best_return,
             "recent_returns": list(self.recent_returns),
             "train_time": self.train_time,
+            "wall_time": self.wall_time(),
         }
+
+    def wall_time(self) -> float:
+        """Seconds since the run started, the time before a resume included."""
+        return self.earlier_wall_time + time.perf_counter() - self.start_time
 
     def save_checkpoint(self, eval_return: Optional[float] = None) -> Path:
         path = self.ckpt.save(self.state_dict(), eval_return)
@@ -346,7 +355,7 @@ class Trainer:
             "status": status,
             "frames": self.frames,
             "iterations": self.iteration,
-            "wall_s": round(time.perf_counter() - self.start_time, 3),
+            "wall_s": round(self.wall_time(), 3),
             "train_s": round(self.train_time, 3),
             "sps": round(self.frames / self.train_time, 1) if self.train_time else None,
             "eval_return_mean": last_eval.get("return_mean"),
