@@ -8,6 +8,7 @@ run alternately A B A B so drift on the machine hits both sides alike.
     python benchmarks/speed.py                    # app vs SB3, 1 env, 2 rounds
     python benchmarks/speed.py --batched          # also 8 envs x 256 steps
     python benchmarks/speed.py --no-sb3           # the app alone (SB3 not installed)
+    python benchmarks/speed.py --backends fast,torchrl --batched   # both collector backends beside SB3
 
 SB3 is a benchmark-only dependency: `pip install -e ".[bench]"` (or `make bench`).
 """
@@ -108,6 +109,7 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=2)
     parser.add_argument("--batched", action="store_true", help="also run 8 envs x 256 steps per batch")
     parser.add_argument("--no-sb3", action="store_true")
+    parser.add_argument("--backends", default="fast", help="collector backends of the app, comma-separated")
     parser.add_argument("--child", choices=["app", "sb3"], help=argparse.SUPPRESS)
     parser.add_argument("--num-envs", type=int, default=1, help=argparse.SUPPRESS)
     args, extra = parser.parse_known_args()
@@ -122,21 +124,21 @@ def main() -> None:
     for num_envs in settings:
         print(f"\n{ENV_ID}, {num_envs} env(s) x {2048 // num_envs} steps, {args.frames} frames, "
               f"10 epochs x minibatch 64, whole process:")
-        results: dict[str, list[dict]] = {"ppo_torchrl": [], "sb3": []}
+        sides = [(f"app[{b}]", "app", [f"collector.backend={b}", *extra]) for b in args.backends.split(",")]
+        sides += [] if args.no_sb3 else [("sb3", "sb3", [])]
+        results: dict[str, list[dict]] = {name: [] for name, _, _ in sides}
         for r in range(args.rounds):
-            for name, kind in (("ppo_torchrl", "app"), ("sb3", "sb3")):
-                if kind == "sb3" and args.no_sb3:
-                    continue
-                res = run_child(kind, args.frames, num_envs, extra if kind == "app" else [])
+            for name, kind, overrides in sides:
+                res = run_child(kind, args.frames, num_envs, overrides)
                 results[name].append(res)
-                print(f"  round {r + 1} {name:12s} {res['sps']:8,.0f} frames/s  (in-loop {res['inner_sps']:8,.0f})"
+                print(f"  round {r + 1} {name:14s} {res['sps']:8,.0f} frames/s  (in-loop {res['inner_sps']:8,.0f})"
                       f"  wall {res['wall_s']:6.1f} s  peak RSS {res['peak_rss_mb']:6.0f} MB", flush=True)
-        app = sum(x["sps"] for x in results["ppo_torchrl"]) / len(results["ppo_torchrl"])
-        line = f"  mean ppo_torchrl {app:,.0f} frames/s = {app / raw:.0%} of the raw env step rate"
-        if results["sb3"]:
-            sb3 = sum(x["sps"] for x in results["sb3"]) / len(results["sb3"])
-            line += f"; SB3 {sb3:,.0f} frames/s; ratio {app / sb3:.2f}x"
-        print(line)
+        mean = {name: sum(x["sps"] for x in rows) / len(rows) for name, rows in results.items()}
+        for name, sps in mean.items():
+            line = f"  mean {name:14s} {sps:8,.0f} frames/s = {sps / raw:.0%} of the raw env step rate"
+            if "sb3" in mean and name != "sb3":
+                line += f"; {sps / mean['sb3']:.2f}x SB3"
+            print(line)
 
 
 if __name__ == "__main__":

@@ -1,0 +1,68 @@
+"""Parity of the two collector backends: copy a `collector.backend=fast,torchrl` sweep's runs into
+results/ and write a side-by-side table (per seed, and mean +- sample std per backend), with
+Welch's t-test per metric where scipy is installed.
+
+    python -m ppo_torchrl -m env=InvertedPendulum-v4 collector.backend=fast,torchrl seed=1,2,3 \\
+        collector.total_frames=61440 logger=none hydra/launcher=joblib hydra.launcher.n_jobs=2 \\
+        hydra.sweep.dir=outputs/multirun/parity_ip
+    python benchmarks/parity.py outputs/multirun/parity_ip results/parity/InvertedPendulum-v4
+"""
+
+import json
+import shutil
+import sys
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+METRICS = [("train_return_last100", "train return (last 100)"), ("eval_return_mean", "eval return (final, 10 ep.)"),
+           ("sps", "frames/s")]
+
+
+def main(sweep: Path, dest: Path) -> None:
+    dest.mkdir(parents=True, exist_ok=True)
+    runs = {}
+    for summary in sorted(sweep.glob("*/summary.json")):
+        s = json.loads(summary.read_text())
+        backend = yaml.safe_load((summary.parent / "config.yaml").read_text())["collector"]["backend"]
+        if s.get("status") != "finished":
+            print(f"left out {summary.parent.name}: status {s.get('status')}")
+            continue
+        run = dest / f"{backend}_seed{s['seed']}"
+        run.mkdir(exist_ok=True)
+        for name in ("summary.json", "metrics.csv", "config.yaml"):
+            shutil.copy(summary.parent / name, run / name)
+        runs.setdefault(backend, []).append(s)
+    env = next(iter(runs.values()))[0]["env"]
+    frames = next(iter(runs.values()))[0]["frames"]
+    lines = [f"# Backend parity: {env}, {frames:,} frames", "",
+             f"Made by `python benchmarks/parity.py {sweep} {dest}` from the sweep in its header.", "",
+             "| backend | seeds | " + " | ".join(f"{title} per seed | mean +- sample std" for _, title in METRICS) + " |",
+             "|---|---|" + "---|---|" * len(METRICS)]
+    for backend, rows in sorted(runs.items()):
+        rows.sort(key=lambda r: r["seed"])
+        cells = []
+        for key, _ in METRICS:
+            values = np.array([r[key] for r in rows], float)
+            std = values.std(ddof=1) if len(values) > 1 else float("nan")
+            cells += [", ".join(f"{v:.0f}" for v in values), f"{values.mean():.0f} +- {std:.0f}"]
+        lines.append(f"| {backend} | {' '.join(str(r['seed']) for r in rows)} | " + " | ".join(cells) + " |")
+    if len(runs) == 2:
+        try:
+            from scipy.stats import ttest_ind
+        except ImportError:
+            ttest_ind = None
+        if ttest_ind is not None:
+            a, b = (runs[k] for k in sorted(runs))
+            lines.append("")
+            for key, title in METRICS[:2]:
+                x, y = [r[key] for r in a], [r[key] for r in b]
+                p = ttest_ind(x, y, equal_var=False).pvalue if np.std(x) + np.std(y) > 0 else 1.0
+                lines.append(f"- {title}: Welch's t-test p = {p:.2f}")
+    (dest / "table.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main(Path(sys.argv[1]), Path(sys.argv[2]))
