@@ -94,7 +94,7 @@ def check_resume(resume: str, overrides: list[str]) -> Path:
     """`resume=<dir>` must be a run dir with a checkpoint that has frames left to train."""
     from ppo_torchrl import checkpoint
     from ppo_torchrl.config import resume_config
-    from ppo_torchrl.validation import validate_config
+    from ppo_torchrl.validation import check_frames_left, validate_config
 
     run_dir = Path(resume).expanduser()
     if not run_dir.is_dir():
@@ -104,10 +104,8 @@ def check_resume(resume: str, overrides: list[str]) -> Path:
                           "and checkpoints/last.pt")
     cfg = resume_config(run_dir, [o for o in overrides if not o.startswith("resume=")])
     validate_config(cfg)
-    frames = checkpoint.load(run_dir / "checkpoints" / checkpoint.LAST)["frames"]
-    if frames >= cfg.collector.total_frames:
-        raise ConfigError(f"resume={run_dir}: the run has done {frames} frames already, collector.total_frames="
-                          f"{cfg.collector.total_frames} leaves nothing to do; give a larger collector.total_frames")
+    check_frames_left(run_dir, checkpoint.load(run_dir / "checkpoints" / checkpoint.LAST)["frames"],
+                      cfg.collector.total_frames)
     return run_dir
 
 

@@ -31,7 +31,7 @@ from ppo_torchrl.losses import (LOSS_INPUT_KEYS, LOSS_METRICS, NOT_COMPILABLE, m
                                 make_optimizer)
 from ppo_torchrl.models import make_actor_critic
 from ppo_torchrl.signals import ON_DISK, Interrupt, StopRequest
-from ppo_torchrl.validation import resolve_device, validate_config
+from ppo_torchrl.validation import check_frames_left, resolve_device, validate_config
 
 
 def batch_entropy(dist) -> float:
@@ -54,10 +54,8 @@ def use_compile(cfg) -> bool:
 class Trainer:
     def __init__(self, cfg, run_dir: Path, resume: Optional[dict] = None):
         self.spec = validate_config(cfg)
-        if resume is not None and resume["frames"] >= cfg.collector.total_frames:
-            raise ConfigError(f"resume={run_dir}: the run has done {resume['frames']} frames already, "
-                              f"collector.total_frames={cfg.collector.total_frames} leaves nothing to do; "
-                              f"give a larger collector.total_frames")
+        if resume is not None:
+            check_frames_left(run_dir, resume["frames"], cfg.collector.total_frames)
         self.cfg = cfg
         self.run_dir = Path(run_dir)
         self.run_dir.mkdir(parents=True, exist_ok=True)

@@ -100,6 +100,13 @@ def validate_config(cfg):
     return env_spec(cfg.env)
 
 
+def check_frames_left(run_dir, frames_done: int, total_frames: int) -> None:
+    """A resume must leave frames to train (a smaller total would be a silent no-op)."""
+    if frames_done >= total_frames:
+        raise ConfigError(f"resume={run_dir}: the run has done {frames_done} frames already, collector.total_frames="
+                          f"{total_frames} leaves nothing to do; give a larger collector.total_frames")
+
+
 def resolve_device(name: str):
     import torch
 
