@@ -36,8 +36,11 @@ def main(sweep: Path, dest: Path) -> None:
         runs.setdefault(backend, []).append(s)
     env = next(iter(runs.values()))[0]["env"]
     frames = next(iter(runs.values()))[0]["frames"]
-    lines = [f"# Backend parity: {env}, {frames:,} frames", "",
-             f"Made by `python benchmarks/parity.py {sweep} {dest}` from the sweep in its header.", "",
+    hydra = yaml.safe_load((sweep / "multirun.yaml").read_text())["hydra"]
+    command = " ".join(["python -m ppo_torchrl -m", *hydra["overrides"]["task"],
+                        *(o for o in hydra["overrides"]["hydra"] if not o.startswith("hydra.mode"))])
+    lines = [f"# Backend parity: {env}, {frames:,} frames", "", f"Runs: `{command}`", "",
+             f"Table: `python benchmarks/parity.py {sweep} {dest}`", "",
              "| backend | seeds | " + " | ".join(f"{title} per seed | mean +- sample std" for _, title in METRICS) + " |",
              "|---|---|" + "---|---|" * len(METRICS)]
     for backend, rows in sorted(runs.items()):
