@@ -198,3 +198,34 @@ def test_checkpoints_are_pruned_by_frame_count(tmp_path):
         checkpoint.save(tmp_path / f"frames_{frames:d}.pt", {"actor": {}, "frames": frames})
     manager.save({"actor": {}, "frames": 1000})
     assert sorted(p.name for p in tmp_path.glob("frames_*.pt")) == ["frames_0000001000.pt", "frames_900.pt"]
+
+
+def test_a_sweep_dir_that_holds_runs_is_refused(finished_run, tmp_path, capsys):
+    import shutil
+
+    sweep = tmp_path / "sweep"
+    shutil.copytree(finished_run, sweep / "0_InvertedPendulum-v4_seed1")
+    before = tree_digest(sweep)
+    code, lines = refused(["-m", "env=InvertedPendulum-v4", *TINY, "seed=1,2", f"hydra.sweep.dir={sweep}"], capsys)
+    assert code == 2 and len(lines) == 1 and "already holds a sweep" in lines[0] and "overwrite=true" in lines[0]
+    assert tree_digest(sweep) == before
+
+
+@pytest.mark.parametrize("debug", [False, True])
+def test_an_internal_error_is_one_line_exit_1_and_its_traceback_in_the_run_dir(tmp_path, capsys, monkeypatch, debug):
+    from ppo_torchrl.signals import ON_DISK
+
+    if debug:
+        monkeypatch.setenv("PPO_TORCHRL_DEBUG", "1")
+    monkeypatch.setattr(ON_DISK, "run_dir", tmp_path)
+
+    def buggy():
+        raise KeyError("a bug")
+
+    with pytest.raises(SystemExit) as exit_:
+        guarded(buggy)
+    err = capsys.readouterr().err
+    assert exit_.value.code == 1
+    assert err.strip().splitlines()[-1].startswith("error: internal error (KeyError: 'a bug'); please report it")
+    assert ("Traceback" in err) == debug  # the traceback on screen only with PPO_TORCHRL_DEBUG=1
+    assert "raise KeyError" in (tmp_path / "error.log").read_text()
