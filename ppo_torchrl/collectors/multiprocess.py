@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import functools
 import signal
+import socket
 import sys
 import threading
 from typing import List, Optional, Tuple
@@ -36,6 +37,12 @@ from ppo_torchrl.models import ActorCritic
 from ppo_torchrl.normalization import ReturnNormalization
 
 Moments = Tuple[torch.Tensor, torch.Tensor, torch.Tensor]  # count, mean, mean of squares
+
+
+def is_ray_running() -> bool:
+    import ray
+
+    return ray.is_initialized()
 
 
 def worker_env(env_cfg: dict, clip_actions: bool, gamma: float, num_envs: int, obs_stats: Optional[dict]):
@@ -100,6 +107,7 @@ class MultiProcessCollector(TorchRLCollector):
         make_env = functools.partial(worker_env, OmegaConf.to_container(cfg.env, resolve=True),
                                      num_envs=c.num_envs, obs_stats=fixed, **env_kwargs)
         self.workers = c.workers
+        self.started_ray = c.distributed == "ray" and not c.ray_address and not is_ray_running()
         self.collector = self._make(c, [make_env] * c.workers, ac, device)
         self.collector.set_seed(seed)
         self._base = None  # the merged moments the workers started the batch from (None: nothing seen)
@@ -180,6 +188,22 @@ class MultiProcessCollector(TorchRLCollector):
 
     def close(self) -> None:
         self.collector.shutdown()
+        if self.started_ray:  # the local Ray instance of this run (a cluster joined stays up)
+            import ray
+
+            ray.shutdown()
+
+
+def check_reachable(address: Optional[str], timeout_s: float = 5.0) -> None:
+    """A host:port that nothing answers on is one line in seconds (ray.init would retry for minutes)."""
+    if not address or address == "auto" or "://" in address:
+        return  # auto: Ray reads the address `ray start` wrote on this node, and says so when there is none
+    host, _, port = address.rpartition(":")
+    try:
+        socket.create_connection((host or "127.0.0.1", int(port)), timeout=timeout_s).close()
+    except (OSError, ValueError) as exc:
+        raise ConfigError(f"collector.ray_address={address}: no Ray head answers there ({exc}); start one with "
+                          "`ray start --head` and give its address (or auto on its node)") from None
 
 
 def make_ray_collector(c, make_env: list, ac: ActorCritic, kwargs: dict):
@@ -188,14 +212,16 @@ def make_ray_collector(c, make_env: list, ac: ActorCritic, kwargs: dict):
     import ray
     from torchrl.collectors.distributed import RayCollector
 
+    where = f"collector.ray_address={c.ray_address}" if c.ray_address else "a local Ray instance"
     if not ray.is_initialized():
+        check_reachable(c.ray_address)
         try:
             ray.init(address=c.ray_address, include_dashboard=False, log_to_driver=False,
                      configure_logging=True, logging_level="warning")
         except (ConnectionError, RuntimeError, ValueError) as exc:
             detail = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-            where = f"collector.ray_address={c.ray_address}" if c.ray_address else "a local Ray instance"
             raise ConfigError(f"cannot start or join {where}: {detail}") from None
     print(f"ray: {len(ray.nodes())} node(s), {int(ray.cluster_resources().get('CPU', 0))} CPUs", file=sys.stderr)
+    kwargs["total_frames"] = sys.maxsize  # RayCollector reads -1 (endless) as "nothing to collect"
     return RayCollector(make_env, ac.actor, sync=True, num_collectors=c.workers,
                         remote_configs={"num_cpus": 1, "memory": 1024**3}, **kwargs)
