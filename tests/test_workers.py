@@ -8,9 +8,9 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
-import psutil
 import pytest
 import torch
 
@@ -21,6 +21,20 @@ from ppo_torchrl.collectors.multiprocess import pool
 from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.trainer import Trainer
 from ppo_torchrl.validation import validate_config, warn_if_oversubscribed
+
+def descendants(pid: int) -> list:
+    """Process ids under `pid` (`pgrep -P`, recursively)."""
+    found = subprocess.run(["pgrep", "-P", str(pid)], capture_output=True, text=True).stdout.split()
+    return [int(c) for c in found] + [d for c in found for d in descendants(int(c))]
+
+
+def alive(pid: int) -> bool:
+    """Running (a zombie waiting for its reaper is not)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
 
 WORKERS = ["collector.workers=2", "collector.num_envs=2"]  # 256 frames: 2 workers x 2 envs x 64 steps
 
@@ -144,7 +158,7 @@ def test_ctrl_c_during_a_workers_run_saves_exits_130_leaves_no_workers_and_resum
         while time.time() < deadline and not (metrics.is_file() and len(metrics.read_text().splitlines()) > 2):
             assert proc.poll() is None, proc.stderr.read()
             time.sleep(0.2)
-        workers = psutil.Process(proc.pid).children(recursive=True)
+        workers = descendants(proc.pid)
         assert len(workers) >= 2
         os.killpg(proc.pid, signal.SIGINT)  # what Ctrl-C in a terminal does: the whole process group
         _, err = proc.communicate(timeout=120)
@@ -154,8 +168,10 @@ def test_ctrl_c_during_a_workers_run_saves_exits_130_leaves_no_workers_and_resum
     assert proc.returncode == 130, err
     assert err.strip().splitlines()[-1].startswith("interrupted: checkpoint at frame")
     assert (run_dir / "checkpoints" / "last.pt").is_file()
-    psutil.wait_procs(workers, timeout=10)
-    assert not [p for p in workers if p.is_running() and p.status() != psutil.STATUS_ZOMBIE]
+    deadline = time.time() + 10
+    while time.time() < deadline and any(alive(p) for p in workers):
+        time.sleep(0.2)
+    assert not [p for p in workers if alive(p)]
     frames = json.loads((run_dir / "summary.json").read_text())["frames"]
 
     result = run_cli(f"resume={run_dir}", f"collector.total_frames={frames + 512}")
