@@ -141,6 +141,16 @@ class CollectorConfig:
     # fast: the same pipeline's math in a lean numpy loop over the same gymnasium envs (same batch keys,
     # same statistics); auto: fast unless env.transforms.extra asks for TorchRL transforms.
     backend: str = "auto"
+    # Worker processes, each stepping num_envs envs built from this config: > 1 runs TorchRL's
+    # MultiSyncCollector (collectors/multiprocess.py). A batch stays frames_per_batch on-policy frames
+    # (frames_per_batch / workers from each), the weights go to every worker after each update, and
+    # the workers' normalization statistics are merged into one set after each batch.
+    workers: int = 1
+    # null: local processes; ray: TorchRL's RayCollector with `workers` remote collectors
+    # (pip install -e ".[ray]"), on a local ray.init() unless ray_address joins a cluster (auto: the
+    # one `ray start` runs on this node; or host:port).
+    distributed: Optional[str] = None
+    ray_address: Optional[str] = None
 
 
 @dataclass

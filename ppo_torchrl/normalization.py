@@ -122,6 +122,21 @@ class ReturnNormalization(Transform):
         super().__init__(in_keys=["reward"], out_keys=["reward"])
         self.normalizer = ReturnNormalizer(num_envs, gamma, clip, epsilon)
 
+    def get_extra_state(self) -> Dict[str, torch.Tensor]:
+        """In the module's state_dict (and so in a TorchRL collector's): the return statistics and
+        each env's discounted return so far, which is how worker processes hand them over to merge."""
+        stats = self.normalizer.stats
+        return {"mean": torch.tensor(stats.mean), "var": torch.tensor(stats.var),
+                "count": torch.tensor(stats.count, dtype=torch.float64),
+                "returns": torch.from_numpy(self.normalizer.returns.copy())}
+
+    def set_extra_state(self, state) -> None:
+        if not state:
+            return
+        self.normalizer.stats.load_state_dict({k: np.asarray(state[k]) for k in ("mean", "var", "count")})
+        if "returns" in state:
+            self.normalizer.returns = np.asarray(state["returns"], np.float64).copy()
+
     def _step(self, tensordict: TensorDictBase, next_tensordict: TensorDictBase) -> TensorDictBase:
         reward = next_tensordict.get("reward")
         done = next_tensordict.get("done").reshape(-1).cpu().numpy()

@@ -73,6 +73,13 @@ class Trainer:
         if use_compile(cfg):
             self.loss_step = torch.compile(self.loss_step)
         self.collector = make_collector(cfg, self.ac, cfg.seed, self.device)
+        try:
+            self._set_up(cfg, resume)
+        except BaseException:  # worker processes (collector.workers > 1) must not outlive a failed start
+            self.collector.close()
+            raise
+
+    def _set_up(self, cfg, resume: Optional[dict]) -> None:
         self.logger = make_logger(cfg.logger, self.run_dir, run_name=f"{cfg.env.id}_seed{cfg.seed}_{self.run_dir.name}")
         self.ckpt = CheckpointManager(self.run_dir / "checkpoints", cfg.checkpoint.keep_last, cfg.checkpoint.save_best)
 

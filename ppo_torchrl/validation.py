@@ -7,6 +7,10 @@ once, so a missing dependency or a bad model file fails here and not after hours
 
 from __future__ import annotations
 
+import importlib.util
+import os
+import sys
+
 from omegaconf import OmegaConf
 
 from ppo_torchrl.errors import ConfigError
@@ -16,6 +20,8 @@ COMPILE_CHOICES = ("auto", "true", "false")
 OBS_NORMS = ("running", "fixed", "none")
 REWARD_NORMS = ("return", "scale", "none")
 CRITIC_LOSSES = ("l2", "l1", "smooth_l1")
+DISTRIBUTED = ("ray",)
+RAY_INSTALL = 'pip install -e ".[ray]" (or: pip install "ray[default]<3")'
 
 
 def one_of(name: str, value, choices) -> tuple:
@@ -45,6 +51,15 @@ def validate_config(cfg):
         (c.frames_per_batch >= 1, f"collector.frames_per_batch={c.frames_per_batch} must be >= 1"),
         (c.num_envs < 1 or c.frames_per_batch % c.num_envs == 0,
          f"collector.frames_per_batch={c.frames_per_batch} must be divisible by collector.num_envs={c.num_envs}"),
+        (c.workers >= 1, f"collector.workers={c.workers} must be >= 1"),
+        (c.workers < 1 or c.num_envs < 1 or c.frames_per_batch % (c.workers * c.num_envs) == 0,
+         f"collector.frames_per_batch={c.frames_per_batch} must be divisible by collector.workers x "
+         f"collector.num_envs={c.workers} x {c.num_envs}: each worker steps an equal share"),
+        (c.distributed is None or c.distributed in DISTRIBUTED,
+         f"collector.distributed='{c.distributed}' is not known; use null (local processes) or "
+         f"{', '.join(DISTRIBUTED)}"),
+        (c.ray_address is None or c.distributed == "ray",
+         f"collector.ray_address={c.ray_address} needs collector.distributed=ray"),
         (c.total_frames >= c.frames_per_batch,
          f"collector.total_frames={c.total_frames} must be >= collector.frames_per_batch={c.frames_per_batch}"),
         one_of("collector.backend", c.backend, CHOICES),
@@ -96,6 +111,8 @@ def validate_config(cfg):
             raise ConfigError(message)
     resolve_device(cfg.device)
     resolve_backend(cfg)
+    if c.distributed == "ray" and importlib.util.find_spec("ray") is None:
+        raise ConfigError(f"collector.distributed=ray needs Ray, which is not installed: {RAY_INSTALL}")
     validate_policy_config(cfg.policy)
     return env_spec(cfg.env)
 
@@ -105,6 +122,14 @@ def check_frames_left(run_dir, frames_done: int, total_frames: int) -> None:
     if frames_done >= total_frames:
         raise ConfigError(f"resume={run_dir}: the run has done {frames_done} frames already, collector.total_frames="
                           f"{total_frames} leaves nothing to do; give a larger collector.total_frames")
+
+
+def warn_if_oversubscribed(collector_cfg) -> None:
+    """More local worker processes than cores runs, only slower: one line on stderr, once per run."""
+    cores = os.cpu_count() or 1
+    if collector_cfg.workers > cores and not collector_cfg.ray_address:
+        print(f"warning: collector.workers={collector_cfg.workers} is more than this machine's {cores} cores; "
+              "the workers will share them (and run no faster than with fewer)", file=sys.stderr, flush=True)
 
 
 def resolve_device(name: str):

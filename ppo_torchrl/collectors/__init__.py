@@ -9,6 +9,8 @@ one entry in BACKENDS.
 - `torchrl` (torchrl_collector.py): TorchRL's `Collector` over `TransformedEnv(GymWrapper)`, the
   reference pipeline; any TorchRL transform can be added to it (`env.transforms.extra`).
 - `fast` (fast.py): the same math in a lean numpy loop, the default when no extra transform is asked.
+- `multiprocess` (multiprocess.py): TorchRL's `MultiSyncCollector` (`collector.workers` > 1) or
+  `RayCollector` (`collector.distributed=ray`) over the torchrl backend's env; chosen by those keys.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ import torch
 from tensordict import TensorDict
 
 from ppo_torchrl.collectors.fast import FastCollector
+from ppo_torchrl.collectors.multiprocess import MultiProcessCollector
 from ppo_torchrl.collectors.torchrl_collector import TorchRLCollector
 from ppo_torchrl.errors import ConfigError
 
@@ -41,13 +44,20 @@ class Collector(Protocol):
     def close(self) -> None: ...
 
 
-BACKENDS: Dict[str, type] = {"fast": FastCollector, "torchrl": TorchRLCollector}
-CHOICES = ("auto", *BACKENDS)
+BACKENDS: Dict[str, type] = {"fast": FastCollector, "torchrl": TorchRLCollector,
+                              "multiprocess": MultiProcessCollector}
+CHOICES = ("auto", "fast", "torchrl")  # collector.backend; multiprocess follows from workers / distributed
 
 
 def resolve_backend(cfg) -> str:
-    """`auto`: fast unless TorchRL transforms are asked for; fast with them is a one-line error."""
+    """`auto`: fast unless TorchRL transforms are asked for; fast with them is a one-line error.
+    Several workers (or Ray) run TorchRL's collectors over the torchrl backend's env."""
     backend, extra = cfg.collector.backend, bool(cfg.env.transforms.extra)
+    if cfg.collector.workers > 1 or cfg.collector.distributed:
+        if backend == "fast":
+            raise ConfigError("collector.workers > 1 and collector.distributed run TorchRL's collectors over the "
+                              "torchrl backend's env: use collector.backend=auto (or torchrl), not fast")
+        return "multiprocess"
     if backend == "auto":
         return "torchrl" if extra else "fast"
     if backend == "fast" and extra:

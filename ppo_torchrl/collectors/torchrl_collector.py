@@ -33,15 +33,19 @@ class TorchRLCollector:
             env_device="cpu",
             storing_device=device,
         )
+        self._start(cfg.collector.num_envs)
+
+    def _start(self, envs: int) -> None:
+        """What every TorchRL collector keeps beside `self.env` (the stats) and `self.collector`."""
         self._iterator = iter(self.collector)
         self._finished: List[Tuple[float, int]] = []
         self.obs_norm = observation_norm(self.env)
-        self._seen = cfg.collector.num_envs  # observations the normalizer has seen: the first resets
+        self._seen = envs  # observations the normalizer has seen: the first resets
 
     def collect(self) -> TensorDict:
         batch = next(self._iterator)
-        if batch.ndim == 1:  # one env: [steps] -> [1, steps]; batched envs come as [num_envs, steps]
-            batch = batch.unsqueeze(0)
+        # one env: [steps]; batched envs: [num_envs, steps]; workers add a leading dim: all -> [envs, steps]
+        batch = batch.reshape(-1, batch.shape[-1])
         done = batch.get(("next", "done")).squeeze(-1)
         self._seen += batch.numel() + int(done.sum())  # each step's observation, and each reset's
         returns = batch.get(("next", "episode_reward"))[done].reshape(-1).tolist()
