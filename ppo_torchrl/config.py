@@ -132,7 +132,7 @@ class OptimConfig:
 
 @dataclass
 class CollectorConfig:
-    """How frames are gathered (collector.py)."""
+    """How frames are gathered (collectors/)."""
 
     frames_per_batch: int = 2048
     total_frames: int = 1_000_000

@@ -252,8 +252,39 @@ def env_spec(env_cfg) -> EnvSpec:
     return spec
 
 
-def _wrapped_gym_env(env_cfg, device: str, render_mode: Optional[str], render_kwargs: dict) -> GymWrapper:
-    return GymWrapper(make_gym_env(env_cfg, render_mode, **render_kwargs), device=device)
+class ResumableReset(gym.Wrapper):
+    """Its next reset() can continue a saved episode instead of starting one: how a resumed run of the
+    torchrl backend picks up each env where its checkpoint left it (simulator state, time-limit
+    counter, RNG and the observation the policy acts on next), as the fast backend does."""
+
+    def __init__(self, env: gym.Env):
+        super().__init__(env)
+        self.pending: Optional[dict] = None
+        self.last_obs: Optional[np.ndarray] = None
+
+    def position(self) -> dict:
+        return {"env": get_env_state(self.env), "obs": self.last_obs.copy()}
+
+    def reset(self, **kwargs):
+        if self.pending is None:
+            self.last_obs, info = self.env.reset(**kwargs)
+            return self.last_obs, info
+        position, self.pending = self.pending, None
+        set_env_state(self.env, position["env"])
+        self.last_obs = position["obs"].copy()
+        return self.last_obs.copy(), {}
+
+    def step(self, action):
+        self.last_obs, reward, terminated, truncated, info = self.env.step(action)
+        return self.last_obs, reward, terminated, truncated, info
+
+
+def _gym_env(env_cfg, render_mode: Optional[str], render_kwargs: dict, resumable: Optional[list]) -> gym.Env:
+    env = make_gym_env(env_cfg, render_mode, **render_kwargs)
+    if resumable is not None:
+        env = ResumableReset(env)
+        resumable.append(env)
+    return env
 
 
 def make_torchrl_env(
@@ -266,6 +297,7 @@ def make_torchrl_env(
     render_mode: Optional[str] = None,
     device: str = "cpu",
     num_envs: int = 1,
+    resumable: Optional[list] = None,
     **render_kwargs,
 ) -> TransformedEnv:
     """`TransformedEnv(GymWrapper(gymnasium env))` with the configured transforms.
@@ -274,14 +306,15 @@ def make_torchrl_env(
     reward normalization, as the collector needs them.
     train=False: observation statistics frozen from `obs_stats` (mean/var) into an ObservationNorm,
     rewards left raw: the evaluation env, whose returns are the ones a user compares.
+    resumable: a list that receives each gymnasium env, wrapped in `ResumableReset`.
     """
     t = env_cfg.transforms
     # The same gymnasium env the fast collector steps, wrapped (GymEnv(id, frame_skip=...) would take
     # frame_skip as its own action repeat instead of passing it to the MuJoCo env).
     if num_envs == 1:
-        base = _wrapped_gym_env(env_cfg, device, render_mode, render_kwargs)
+        base = GymWrapper(_gym_env(env_cfg, render_mode, render_kwargs, resumable), device=device)
     else:  # one batched env over Gymnasium's vector env: one process, no per-env TensorDict (2.7x SerialEnv)
-        make = functools.partial(make_gym_env, env_cfg, render_mode, **render_kwargs)
+        make = functools.partial(_gym_env, env_cfg, render_mode, render_kwargs, resumable)
         vector = gym.vector.SyncVectorEnv([make] * num_envs, autoreset_mode=gym.vector.AutoresetMode.DISABLED)
         base = GymWrapper(vector, device=device)
     transforms = []

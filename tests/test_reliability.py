@@ -29,10 +29,12 @@ def metric_rows(run_dir):
     return [[v for i, v in enumerate(line.split(",")) if i not in skip] for line in lines[1:]]
 
 
-def test_interrupted_and_resumed_run_matches_an_uninterrupted_one(tiny_cfg, tmp_path):
-    Trainer(tiny_cfg(*FOUR_ITERATIONS), tmp_path / "straight").train()
+@pytest.mark.parametrize("backend, envs", [("fast", 1), ("torchrl", 1), ("torchrl", 2)])
+def test_interrupted_and_resumed_run_matches_an_uninterrupted_one(tiny_cfg, tmp_path, backend, envs):
+    overrides = [*FOUR_ITERATIONS, f"collector.backend={backend}", f"collector.num_envs={envs}"]
+    Trainer(tiny_cfg(*overrides), tmp_path / "straight").train()
 
-    interrupted = Trainer(tiny_cfg(*FOUR_ITERATIONS), tmp_path / "cut")
+    interrupted = Trainer(tiny_cfg(*overrides), tmp_path / "cut")
     collect = interrupted.collector.collect
 
     def collect_then_signal():  # SIGINT arrives during the second iteration's collection

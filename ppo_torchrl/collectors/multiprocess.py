@@ -92,6 +92,8 @@ def return_state(moments: Moments, like: dict) -> dict:
 class MultiProcessCollector(TorchRLCollector):
     """The torchrl backend's batches, stats and checkpoints, collected by several processes."""
 
+    RESUMES_EPISODES = False  # the envs live in the workers: a resume starts new episodes there
+
     def __init__(self, cfg, ac: ActorCritic, seed: int, device: torch.device):
         from ppo_torchrl.validation import warn_if_oversubscribed
 

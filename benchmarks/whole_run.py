@@ -1,0 +1,146 @@
+"""What a user waits for: a whole training run of this app beside Stable-Baselines3, process start to exit.
+
+    .venv/bin/python benchmarks/whole_run.py --frames 1000000 [--tuned] [--out results/speed/whole_run]
+
+- The app runs with its defaults (periodic evals, checkpoints, csv logging all on):
+  `python -m ppo_torchrl env=gym env.id=Hopper-v4 collector.total_frames=N`, whose untuned values are
+  SB3's PPO defaults; `--tuned` runs `env=Hopper-v4` (the tuned file) and gives SB3 the same values.
+- SB3 runs `model.learn(N)` at the same settings (VecNormalize, 1 env, 1 torch thread), its episodes
+  logged by a Monitor so the time to a score can be read from both logs.
+- The two run side by side, each pinned to its own core (taskset), and start together: neither uses
+  the other's core for its arithmetic.
+Prints and writes (--out/table.md): wall time, the ratio, the in-loop rate, the share of the raw env
+step rate, peak RSS, and the wall-clock time until the last-100 train return first reaches --score.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT / "benchmarks"))
+from speed import raw_env_rate  # noqa: E402
+
+# conf/env/Hopper-v4.yaml's tuned values, in SB3's terms (checked against the file at start).
+TUNED = {"gamma": 0.995, "clip_range": 0.1, "learning_rate": 1e-4, "width": 128}
+
+
+def sb3_child(frames: int, out: Path, tuned: bool) -> None:
+    import warnings
+
+    warnings.filterwarnings("ignore")
+    import resource
+
+    import torch
+
+    torch.set_num_threads(1)
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    gamma = TUNED["gamma"] if tuned else 0.99
+    width = TUNED["width"] if tuned else 64
+    env = VecNormalize(make_vec_env("Hopper-v4", n_envs=1, seed=1, monitor_dir=str(out)), gamma=gamma)
+    model = PPO("MlpPolicy", env, n_steps=2048, batch_size=64, n_epochs=10, gae_lambda=0.95, gamma=gamma,
+                learning_rate=(lambda f: f * TUNED["learning_rate"]) if tuned else (lambda f: f * 3e-4),
+                clip_range=TUNED["clip_range"] if tuned else 0.2, ent_coef=0.0, vf_coef=0.5, max_grad_norm=0.5,
+                policy_kwargs=dict(net_arch=dict(pi=[width, width], vf=[width, width])), seed=1, device="cpu",
+                verbose=0)
+    tick = time.perf_counter()
+    model.learn(frames)
+    inner = frames / (time.perf_counter() - tick)
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    (out / "bench.json").write_text(json.dumps({"inner_sps": inner, "peak_rss_mb": peak}))
+
+
+def time_to_score_app(run: Path, score: float):
+    with open(run / "metrics.csv", newline="") as f:
+        for row in csv.DictReader(f):
+            if row["train/return_last100"] and float(row["train/return_last100"]) >= score:
+                return float(row["time_s"])
+    return None
+
+
+def time_to_score_sb3(out: Path, score: float):
+    """SB3's Monitor: one row per episode with its return `r` and the seconds since start `t`."""
+    path = next(out.glob("*.monitor.csv"))
+    rows = list(csv.DictReader(line for line in path.read_text().splitlines() if not line.startswith("#")))
+    returns = []
+    for row in rows:
+        returns = (returns + [float(row["r"])])[-100:]
+        if sum(returns) / len(returns) >= score:
+            return float(row["t"])
+    return None
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--frames", type=int, default=1_000_000)
+    parser.add_argument("--score", type=float, default=2000.0)
+    parser.add_argument("--tuned", action="store_true", help="env=Hopper-v4 (tuned) and SB3 with the same values")
+    parser.add_argument("--out", type=Path, default=ROOT / "results" / "speed" / "whole_run")
+    parser.add_argument("--sb3-child", type=Path, help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.sb3_child:
+        return sb3_child(args.frames, args.sb3_child, args.tuned)
+
+    stamp = time.strftime("%Y-%m-%d_%H-%M-%S")
+    work = ROOT / "outputs" / "bench_whole_run" / stamp
+    app_run, sb3_dir = work / "app", work / "sb3"
+    sb3_dir.mkdir(parents=True)
+    env_args = ["env=Hopper-v4"] if args.tuned else ["env=gym", "env.id=Hopper-v4"]
+    pin = (lambda core: ["taskset", "-c", str(core)]) if shutil.which("taskset") and os.cpu_count() >= 2 else (lambda core: [])
+    env = {**os.environ, "PYTHONWARNINGS": "ignore", "OMP_NUM_THREADS": "1"}
+    raw = raw_env_rate()
+    app_cmd = [*pin(0), sys.executable, "-m", "ppo_torchrl", *env_args, f"collector.total_frames={args.frames}",
+               "torch_threads=1", f"hydra.run.dir={app_run}"]
+    sb3_cmd = [*pin(1), sys.executable, __file__, "--frames", str(args.frames), "--sb3-child", str(sb3_dir),
+               *(["--tuned"] if args.tuned else [])]
+    tick = time.perf_counter()
+    procs = {name: subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+             for name, cmd in (("app", app_cmd), ("sb3", sb3_cmd))}
+    walls, app_peak = {}, None
+    while len(walls) < len(procs):
+        for name, proc in procs.items():
+            if name not in walls and proc.poll() is not None:
+                walls[name] = time.perf_counter() - tick
+                if name == "app" and "sb3" not in walls:  # the only child waited for so far: its peak
+                    import resource
+
+                    app_peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
+                if proc.returncode != 0:
+                    raise SystemExit(f"{name} failed:\n{proc.stderr.read().decode()[-3000:]}")
+        time.sleep(0.5)
+    summary = json.loads((app_run / "summary.json").read_text())
+    sb3 = json.loads((sb3_dir / "bench.json").read_text())
+    frames_app = summary["frames"]
+    rows = [("ppo_torchrl", walls["app"], summary["sps"], time_to_score_app(app_run, args.score), app_peak),
+            ("SB3", walls["sb3"], sb3["inner_sps"], time_to_score_sb3(sb3_dir, args.score), sb3["peak_rss_mb"])]
+    setting = "env=Hopper-v4 (tuned; SB3 given the same values)" if args.tuned else "env=gym env.id=Hopper-v4 (SB3's defaults)"
+    lines = [f"# Whole run, {setting}, {args.frames:,} frames ({frames_app:,} for the app: whole batches)", "",
+             f"`python benchmarks/whole_run.py --frames {args.frames}{' --tuned' if args.tuned else ''}` ({stamp}); "
+             f"side by side, one core each; raw Hopper-v4 step rate {raw:,.0f} steps/s", "",
+             f"| side | wall s (process) | in-loop frames/s | share of raw env rate | time to last-100 >= {args.score:.0f} (s) | peak RSS MB |",
+             "|---|---|---|---|---|---|"]
+    for name, wall, inner, tts, peak in rows:
+        lines.append(f"| {name} | {wall:.0f} | {inner:,.0f} | {inner / raw:.0%} | "
+                     f"{'not reached' if tts is None else f'{tts:.0f}'} | {'-' if peak is None else f'{peak:.0f}'} |")
+    lines += ["", f"ratio SB3 wall / app wall: {walls['sb3'] / walls['app']:.2f}x (the goal: >= 3x)"]
+    args.out.mkdir(parents=True, exist_ok=True)
+    shutil.copy(app_run / "summary.json", args.out / "app_summary.json")
+    shutil.copy(app_run / "metrics.csv", args.out / "app_metrics.csv")
+    shutil.copy(next(sb3_dir.glob("*.monitor.csv")), args.out / "sb3_monitor.csv")
+    (args.out / "table.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
