@@ -14,8 +14,11 @@ import numpy as np
 from ppo_torchrl import report
 
 
-def main(sweep: Path, dest: Path) -> None:
-    report.main([str(sweep)])
+def copy_finished_runs(sweep: Path, dest: Path, name_of) -> dict:
+    """Copy each finished run's summary.json, metrics.csv and config.yaml to dest/<name_of(summary,
+    config)>_seed<seed>; returns the summaries by that name (runs not finished are left out, said)."""
+    import yaml
+
     dest.mkdir(parents=True, exist_ok=True)
     rows = {}
     for summary in sorted(sweep.glob("*/summary.json")):
@@ -23,11 +26,18 @@ def main(sweep: Path, dest: Path) -> None:
         if s.get("status") != "finished":
             print(f"left out {summary.parent.name}: status {s.get('status')}")
             continue
-        run = dest / f"{s['env']}_seed{s['seed']}"
+        name = name_of(s, yaml.safe_load((summary.parent / "config.yaml").read_text()))
+        run = dest / f"{name}_seed{s['seed']}"
         run.mkdir(exist_ok=True)
-        for name in ("summary.json", "metrics.csv", "config.yaml"):
-            shutil.copy(summary.parent / name, run / name)
-        rows.setdefault(s["env"], []).append(s)
+        for file in ("summary.json", "metrics.csv", "config.yaml"):
+            shutil.copy(summary.parent / file, run / file)
+        rows.setdefault(name, []).append(s)
+    return rows
+
+
+def main(sweep: Path, dest: Path) -> None:
+    report.main([str(sweep)])
+    rows = copy_finished_runs(sweep, dest, lambda summary, config: summary["env"])
     for name in ("sweep_report.png", "sweep_report.md", "sweep_report.csv"):
         shutil.copy(sweep / name, dest / name)
     lines = ["| env | seeds | frames | train return, last 100 (mean +- std) | per seed | deterministic eval (mean +- std) | SPS per run |",

@@ -8,32 +8,21 @@ Welch's t-test per metric where scipy is installed.
     python benchmarks/parity.py outputs/multirun/parity_ip results/parity/InvertedPendulum-v4
 """
 
-import json
-import shutil
 import sys
 from pathlib import Path
 
 import numpy as np
 import yaml
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from collect_results import copy_finished_runs  # noqa: E402
+
 METRICS = [("train_return_last100", "train return (last 100)"), ("eval_return_mean", "eval return (final, 10 ep.)"),
            ("sps", "frames/s")]
 
 
 def main(sweep: Path, dest: Path) -> None:
-    dest.mkdir(parents=True, exist_ok=True)
-    runs = {}
-    for summary in sorted(sweep.glob("*/summary.json")):
-        s = json.loads(summary.read_text())
-        backend = yaml.safe_load((summary.parent / "config.yaml").read_text())["collector"]["backend"]
-        if s.get("status") != "finished":
-            print(f"left out {summary.parent.name}: status {s.get('status')}")
-            continue
-        run = dest / f"{backend}_seed{s['seed']}"
-        run.mkdir(exist_ok=True)
-        for name in ("summary.json", "metrics.csv", "config.yaml"):
-            shutil.copy(summary.parent / name, run / name)
-        runs.setdefault(backend, []).append(s)
+    runs = copy_finished_runs(sweep, dest, lambda summary, config: config["collector"]["backend"])
     env = next(iter(runs.values()))[0]["env"]
     frames = next(iter(runs.values()))[0]["frames"]
     hydra = yaml.safe_load((sweep / "multirun.yaml").read_text())["hydra"]

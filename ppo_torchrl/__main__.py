@@ -211,8 +211,9 @@ def prepare(argv: list[str]) -> list[str]:
     check_env_override(overrides)
     multirun = "-m" in flags or "--multirun" in flags
     resume = next((o.split("=", 1)[1] for o in overrides if o.startswith("resume=")), None)
+    jobs = sweep_jobs(overrides) if multirun else [overrides]
     if any(f in INFO_FLAGS for f in flags):  # print or inspect: check the config, write nothing
-        for job in sweep_jobs(overrides) if multirun else [overrides]:
+        for job in jobs:
             compose(job)
         return dry_run(flags, overrides) if multirun else argv
     if resume and not multirun:
@@ -220,10 +221,9 @@ def prepare(argv: list[str]) -> list[str]:
         rundir.claim(run_dir, resume=True)
         # Keep the run's own .hydra/ as it was: the saved config is the one that resumes.
         return argv + [f"hydra.run.dir={quoted(run_dir)}", "hydra.output_subdir=null"]
-    for job in sweep_jobs(overrides) if multirun else [overrides]:
+    for job in jobs:
         validate_config(compose(job))
-    hydra_cfg = compose(overrides if not multirun else sweep_jobs(overrides)[0] + hydra_overrides(overrides),
-                        with_hydra=True)
+    hydra_cfg = compose(jobs[0] + hydra_overrides(overrides) if multirun else overrides, with_hydra=True)
     overwrite = bool(hydra_cfg.get("overwrite", False))
     if multirun:
         if any(o.startswith("hparams_search=") for o in overrides):

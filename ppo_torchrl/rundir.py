@@ -20,9 +20,9 @@ from pathlib import Path
 from ppo_torchrl.errors import ConfigError
 
 LOCK = ".lock"
-RUN_MARKERS = ("config.yaml", "metrics.csv", "summary.json", "checkpoints")  # config.yaml counts beside .hydra/
+RUN_MARKERS = ("metrics.csv", "summary.json", "checkpoints")  # and config.yaml beside .hydra/
 # What a run writes into its dir (Hydra's too): what overwrite=true removes, and nothing else.
-RUN_FILES = RUN_MARKERS + (".hydra", "logs", "videos", "eval", "report.png", "policy.pt", "error.log",
+RUN_FILES = RUN_MARKERS + ("config.yaml", ".hydra", "logs", "videos", "eval", "report.png", "policy.pt", "error.log",
                            "__main__.log", "multirun.yaml")
 
 _held: dict = {}  # dir -> open lock file, kept for the life of the process
@@ -30,7 +30,7 @@ _held: dict = {}  # dir -> open lock file, kept for the life of the process
 
 def holds_run(directory: Path) -> bool:
     directory = Path(directory)
-    return any((directory / name).exists() for name in RUN_MARKERS[1:]) or (
+    return any((directory / name).exists() for name in RUN_MARKERS) or (
         (directory / "config.yaml").exists() and (directory / ".hydra").exists())
 
 
