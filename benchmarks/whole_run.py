@@ -1,14 +1,17 @@
 """What a user waits for: a whole training run of this app beside Stable-Baselines3, process start to exit.
 
-    .venv/bin/python benchmarks/whole_run.py --frames 1000000 [--tuned] [--out results/speed/whole_run]
+    .venv/bin/python benchmarks/whole_run.py --frames 1000000 [--tuned] [--sequential] [--out results/speed/whole_run]
 
 - The app runs with its defaults (periodic evals, checkpoints, csv logging all on):
   `python -m ppo_torchrl env=gym env.id=Hopper-v4 collector.total_frames=N`, whose untuned values are
   SB3's PPO defaults; `--tuned` runs `env=Hopper-v4` (the tuned file) and gives SB3 the same values.
 - SB3 runs `model.learn(N)` at the same settings (VecNormalize, 1 env, 1 torch thread), its episodes
   logged by a Monitor so the time to a score can be read from both logs.
-- The two run side by side, each pinned to its own core (taskset), and start together: neither uses
-  the other's core for its arithmetic.
+- Side by side (the default): the two start together, each pinned to its own core (taskset): neither
+  uses the other's core, so the app's evals run in line (eval.background=auto is off on one core).
+- --sequential: A then B, each alone on the machine and free to use both cores. The app's periodic
+  evals then run in its second process (eval.background=auto); its training stays on one thread, as
+  SB3's does (1 torch thread each).
 Prints and writes (--out/table.md): wall time, the ratio, the in-loop rate, the share of the raw env
 step rate, peak RSS, and the wall-clock time until the last-100 train return first reaches --score.
 """
@@ -86,6 +89,7 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=1_000_000)
     parser.add_argument("--score", type=float, default=2000.0)
     parser.add_argument("--tuned", action="store_true", help="env=Hopper-v4 (tuned) and SB3 with the same values")
+    parser.add_argument("--sequential", action="store_true", help="A then B, each alone on the machine")
     parser.add_argument("--out", type=Path, default=ROOT / "results" / "speed" / "whole_run")
     parser.add_argument("--sb3-child", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -97,28 +101,31 @@ def main() -> None:
     app_run, sb3_dir = work / "app", work / "sb3"
     sb3_dir.mkdir(parents=True)
     env_args = ["env=Hopper-v4"] if args.tuned else ["env=gym", "env.id=Hopper-v4"]
-    pin = (lambda core: ["taskset", "-c", str(core)]) if shutil.which("taskset") and os.cpu_count() >= 2 else (lambda core: [])
+    can_pin = shutil.which("taskset") and os.cpu_count() >= 2 and not args.sequential
+    pin = (lambda core: ["taskset", "-c", str(core)]) if can_pin else (lambda core: [])
     env = {**os.environ, "PYTHONWARNINGS": "ignore", "OMP_NUM_THREADS": "1"}
     raw = raw_env_rate()
     app_cmd = [*pin(0), sys.executable, "-m", "ppo_torchrl", *env_args, f"collector.total_frames={args.frames}",
                "torch_threads=1", f"hydra.run.dir={app_run}"]
     sb3_cmd = [*pin(1), sys.executable, __file__, "--frames", str(args.frames), "--sb3-child", str(sb3_dir),
                *(["--tuned"] if args.tuned else [])]
-    tick = time.perf_counter()
-    procs = {name: subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-             for name, cmd in (("app", app_cmd), ("sb3", sb3_cmd))}
     walls, app_peak = {}, None
-    while len(walls) < len(procs):
-        for name, proc in procs.items():
-            if name not in walls and proc.poll() is not None:
-                walls[name] = time.perf_counter() - tick
-                if name == "app" and "sb3" not in walls:  # the only child waited for so far: its peak
-                    import resource
+    groups = [[("app", app_cmd)], [("sb3", sb3_cmd)]] if args.sequential else [[("app", app_cmd), ("sb3", sb3_cmd)]]
+    for group in groups:
+        tick = time.perf_counter()
+        procs = {name: subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+                 for name, cmd in group}
+        while any(name not in walls for name in procs):
+            for name, proc in procs.items():
+                if name not in walls and proc.poll() is not None:
+                    walls[name] = time.perf_counter() - tick
+                    if name == "app" and "sb3" not in walls:  # the only child waited for so far: its peak
+                        import resource
 
-                    app_peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
-                if proc.returncode != 0:
-                    raise SystemExit(f"{name} failed:\n{proc.stderr.read().decode()[-3000:]}")
-        time.sleep(0.5)
+                        app_peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
+                    if proc.returncode != 0:
+                        raise SystemExit(f"{name} failed:\n{proc.stderr.read().decode()[-3000:]}")
+            time.sleep(0.5)
     summary = json.loads((app_run / "summary.json").read_text())
     sb3 = json.loads((sb3_dir / "bench.json").read_text())
     frames_app = summary["frames"]
@@ -126,8 +133,11 @@ def main() -> None:
             ("SB3", walls["sb3"], sb3["inner_sps"], time_to_score_sb3(sb3_dir, args.score), sb3["peak_rss_mb"])]
     setting = "env=Hopper-v4 (tuned; SB3 given the same values)" if args.tuned else "env=gym env.id=Hopper-v4 (SB3's defaults)"
     lines = [f"# Whole run, {setting}, {args.frames:,} frames ({frames_app:,} for the app: whole batches)", "",
-             f"`python benchmarks/whole_run.py --frames {args.frames}{' --tuned' if args.tuned else ''}` ({stamp}); "
-             f"side by side, one core each; raw Hopper-v4 step rate {raw:,.0f} steps/s", "",
+             f"`python benchmarks/whole_run.py --frames {args.frames}{' --tuned' if args.tuned else ''}"
+             f"{' --sequential' if args.sequential else ''}` ({stamp}); "
+             + ("one after the other, each alone on the machine (the app's evals in its second process)"
+                if args.sequential else "side by side, one core each (the app's evals in line)")
+             + f"; raw Hopper-v4 step rate {raw:,.0f} steps/s", "",
              f"| side | wall s (process) | in-loop frames/s | share of raw env rate | time to last-100 >= {args.score:.0f} (s) | peak RSS MB |",
              "|---|---|---|---|---|---|"]
     for name, wall, inner, tts, peak in rows:

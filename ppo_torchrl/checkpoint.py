@@ -81,10 +81,15 @@ class CheckpointManager:
             for old_frames, old in saved:
                 if old_frames not in kept:
                     old.unlink()
+        self.offer_best(state, eval_return)
+        return self.dir / LAST
+
+    def offer_best(self, state: dict, eval_return: Optional[float]) -> None:
+        """best.pt, when `eval_return` beats every earlier eval of this run."""
         if self.save_best and eval_return is not None and (self.best_return is None or eval_return > self.best_return):
             self.best_return = eval_return
+            state["best_eval_return"] = eval_return
             save(self.dir / BEST, state)
-        return self.dir / LAST
 
 
 def check_spec(state: dict, spec, env_id: str) -> None:

@@ -7,10 +7,11 @@ is one entry in LOSSES.
 
 from __future__ import annotations
 
-from typing import Callable, Dict, Tuple
+from typing import Callable, Dict, Optional, Tuple
 
 import torch
 from tensordict import TensorDictBase
+from torch.func import functional_call
 
 from torchrl.objectives import A2CLoss, ClipPPOLoss, KLPENPPOLoss, LossModule, PPOLoss, ReinforceLoss
 
@@ -100,17 +101,20 @@ def make_optimizer(cfg, params, device: torch.device) -> torch.optim.Optimizer:
 
 
 def make_loss_step(loss_module: LossModule, normalize_advantage: bool) -> Callable:
-    """minibatch -> (summed loss, the loss module's output): the region `compile` compiles whole.
+    """minibatch -> (summed loss, the loss module's output).
 
     Advantages are normalized per minibatch here, the same for every loss (the modules' own
-    option is off), as CleanRL and SB3 do.
+    option is off), as CleanRL and SB3 do. With `weights` ({name: tensor} of the module's
+    parameters) the module runs on those instead of its own (torch.func.functional_call), which is
+    how minibatch.FusedStep takes its gradients.
     """
 
-    def loss_step(minibatch: TensorDictBase) -> Tuple[torch.Tensor, TensorDictBase]:
+    def loss_step(minibatch: TensorDictBase, weights: Optional[dict] = None) -> Tuple[torch.Tensor, TensorDictBase]:
         if normalize_advantage:
             adv = minibatch.get("advantage")
             minibatch.set("advantage", (adv - adv.mean()) / (adv.std() + 1e-8))
-        out = loss_module(minibatch)
+        out = loss_module(minibatch) if weights is None else \
+            functional_call(loss_module, weights, (minibatch,), tie_weights=False)
         return sum(v for k, v in out.items() if k.startswith("loss_")), out
 
     return loss_step

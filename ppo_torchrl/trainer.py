@@ -6,6 +6,7 @@ module named like its config group (envs, models, losses, advantage, collector, 
 
 from __future__ import annotations
 
+import copy
 import math
 import random
 import sys
@@ -25,10 +26,11 @@ from ppo_torchrl.checkpoint import CheckpointManager, check_spec
 from ppo_torchrl.collectors import make_collector
 from ppo_torchrl.envs import env_label, seed_everything
 from ppo_torchrl.errors import ConfigError, Interrupted, TrainingError
+from ppo_torchrl.eval_worker import BackgroundEval, use_background_eval
 from ppo_torchrl.evaluate import evaluate_policy
 from ppo_torchrl.loggers import COLUMNS, MetricsFile, Progress, close_logger, make_logger, truncate_logs
-from ppo_torchrl.losses import (LOSS_INPUT_KEYS, LOSS_METRICS, NOT_COMPILABLE, make_loss, make_loss_step,
-                                make_optimizer)
+from ppo_torchrl.losses import LOSS_INPUT_KEYS, LOSS_METRICS, NOT_COMPILABLE, make_loss, make_optimizer
+from ppo_torchrl.minibatch import make_minibatch_step
 from ppo_torchrl.models import make_actor_critic
 from ppo_torchrl.signals import ON_DISK, Interrupt, StopRequest
 from ppo_torchrl.validation import check_frames_left, resolve_device, validate_config
@@ -69,9 +71,9 @@ class Trainer:
         self.advantage = make_advantage(cfg.advantage, self.ac.critic)
         self.params = [p for p in self.loss_module.parameters() if p.requires_grad]
         self.optimizer = make_optimizer(cfg.optim, self.params, self.device)
-        self.loss_step = make_loss_step(self.loss_module, cfg.loss.normalize_advantage)
-        if use_compile(cfg):
-            self.loss_step = torch.compile(self.loss_step)
+        # loss -> backward -> clip -> optimizer step: one compiled function with compile on (minibatch.py)
+        self.minibatch_step = make_minibatch_step(cfg, self.loss_module, self.optimizer, self.params,
+                                                  compile=use_compile(cfg))
         self.collector = make_collector(cfg, self.ac, cfg.seed, self.device)
         try:
             self._set_up(cfg, resume)
@@ -89,6 +91,7 @@ class Trainer:
         self.num_iterations = math.ceil(cfg.collector.total_frames / cfg.collector.frames_per_batch)
         self.recent_returns: deque = deque(maxlen=100)
         self.last_eval: Optional[dict] = None
+        self.evals: Optional[BackgroundEval] = None  # eval.background: started by train()
         self.train_time = 0.0  # seconds spent collecting and updating (what SPS divides by)
         self.start_time = time.perf_counter()
         self.earlier_wall_time = 0.0  # seconds the run ran before it was resumed
@@ -161,6 +164,8 @@ class Trainer:
         batch_frames = cfg.collector.frames_per_batch
         stop = StopRequest()
         self.progress = Progress(self.num_iterations * batch_frames, self.frames, cfg.logger.print_every_s)
+        if use_background_eval(cfg):
+            self.evals = BackgroundEval(cfg, self._write_row, self._eval_done)
         try:
             with stop:
                 self._loop(stop, batch_frames)
@@ -168,6 +173,8 @@ class Trainer:
             self.write_summary(status="interrupted")
             raise Interrupted(f"stopped at once; {ON_DISK.describe()}", signal_.signum) from None
         finally:
+            if self.evals is not None:  # rows still waiting are written, without evals not back
+                self.evals.close()
             self.progress.close()
             self.metrics.close()
             self.collector.close()
@@ -192,13 +199,15 @@ class Trainer:
             last = self.iteration == self.num_iterations
             row = {"iteration": self.iteration, "frames": self.frames, "lr": lr, **update_stats}
             row.update(self._episode_stats())
+            if last and self.evals is not None:
+                self.evals.poll(block=True)  # the background evals first: their rows, last_eval and best
             if last and cfg.eval.final_episodes > 0:
                 row.update(self._evaluate(cfg.eval.final_episodes))
             elif not last and self._crossed(cfg.eval.every_frames):
-                row.update(self._evaluate(cfg.eval.episodes))
+                row.update(self._evaluate(cfg.eval.episodes, background=self.evals is not None))
             row["time_s"] = self.wall_time()
             row["sps"] = self.frames / self.train_time
-            self._log(row, last)
+            self._log(row)
             if last or stop.signum is not None or self._crossed(cfg.checkpoint.every_frames):
                 path = self.save_checkpoint(eval_return=row.get("eval/return_mean"))
             if stop.signum is not None and not last:
@@ -241,30 +250,22 @@ class Trainer:
         flat = batch.reshape(-1).select(*LOSS_INPUT_KEYS, strict=False)
         n = flat.numel()
         mb_size = cfg.loss.minibatch_size or n
-        max_norm = cfg.optim.max_grad_norm or math.inf  # with None this only measures the norm
-        epochs = cfg.loss.epochs
-        loss_step, optimizer, params = self.loss_step, self.optimizer, self.params
-        metric_keys, rows, grad_norms = None, [], []
+        epochs, step = cfg.loss.epochs, self.minibatch_step
+        rows, grad_norms = [], []
         for epoch in range(epochs):
-            perm = torch.randperm(n, device=self.device)
+            shuffled = flat[torch.randperm(n, device=self.device)]  # one gather per epoch; minibatches are slices
             for start in range(0, n, mb_size):
-                loss, out = loss_step(flat[perm[start:start + mb_size]])
-                if metric_keys is None:
-                    metric_keys = [k for k in out.keys() if k in LOSS_METRICS]
-                optimizer.zero_grad(set_to_none=True)
-                loss.backward()
-                grad_norm = torch.nn.utils.clip_grad_norm_(params, max_norm)
-                if not torch.isfinite(loss.detach() + grad_norm):  # checked before any bad step is taken
-                    self._non_finite("loss" if not torch.isfinite(loss) else "gradient", epoch, start // mb_size)
-                optimizer.step()
+                metrics, grad_norm = step(shuffled[start:start + mb_size])
+                if not torch.isfinite(metrics[0] + grad_norm):  # the step was not taken
+                    self._non_finite("loss" if not torch.isfinite(metrics[0]) else "gradient", epoch, start // mb_size)
+                rows.append(metrics)
                 grad_norms.append(grad_norm)
-                rows.append(torch.stack([loss.detach(), *(out.get(k).detach().float().mean() for k in metric_keys)]))
-        if not all(torch.isfinite(p).all() for p in params):
+        if not all(torch.isfinite(p).all() for p in self.params):
             self._non_finite("parameter", epochs - 1, None)
         if rows:
             means = torch.stack(rows).mean(0).tolist()
             stats["loss/total"] = means[0]
-            for key, value in zip(metric_keys, means[1:]):
+            for key, value in zip(step.metric_keys, means[1:]):
                 stats[LOSS_METRICS[key]] = value
             stats["train/grad_norm"] = torch.stack(grad_norms).mean().item()
         return stats
@@ -296,25 +297,44 @@ class Trainer:
             stats["train/return_last100"] = float(np.mean(self.recent_returns))
         return stats
 
-    def _evaluate(self, episodes: int) -> dict:
+    def _evaluate(self, episodes: int, background: bool = False) -> dict:
+        """The eval's metrics columns; in the background ({} now), the worker gets a copy of what it needs."""
         video = self.run_dir / "videos" / f"eval_{self.frames:010d}.mp4" if self.cfg.eval.video else None
-        result = evaluate_policy(self.cfg, self.ac, self.collector.obs_stats(), episodes,
-                                 seed=self.cfg.seed + 10_000, deterministic=self.cfg.eval.deterministic,
-                                 video_path=video)
-        self.last_eval = {"frames": self.frames, **result}
+        job = dict(seed=self.cfg.seed + 10_000, deterministic=self.cfg.eval.deterministic, video_path=video)
+        if background:
+            actor = {k: v.detach().to("cpu", copy=True) for k, v in self.ac.actor.state_dict().items()}
+            keep = copy.deepcopy(self.state_dict()) if self.cfg.checkpoint.save_best else None  # best.pt if it wins
+            self.evals.submit(self.frames, dict(actor=actor, obs_stats=copy.deepcopy(self.collector.obs_stats()),
+                                                episodes=episodes, **job), keep)
+            return {}
+        result = evaluate_policy(self.cfg, self.ac, self.collector.obs_stats(), episodes, **job)
+        return self._eval_done(self.frames, result, None)
+
+    def _eval_done(self, frames: int, result: dict, state_then: Optional[dict]) -> dict:
+        """Record an eval of the policy at `frames`; a background one also offers that frame's state as best.pt."""
+        self.last_eval = {"frames": frames, **result}
+        if state_then is not None:
+            state_then["last_eval"] = self.last_eval
+            self.ckpt.offer_best(state_then, result["return_mean"])
         row = {"eval/return_mean": result["return_mean"], "eval/return_std": result["return_std"],
                "eval/length_mean": result["length_mean"],
                "eval/forward_velocity": result.get("forward_velocity_mean"),
                "eval/success_rate": result.get("success_rate")}
         return {k: v for k, v in row.items() if v is not None}
 
-    def _log(self, row: dict, last: bool) -> None:
+    def _log(self, row: dict) -> None:
+        if self.evals is not None:  # written once the evals it waits for are back
+            self.evals.log(row)
+        else:
+            self._write_row(row)
+
+    def _write_row(self, row: dict) -> None:
         self.metrics.write(row)
         if self.logger is not None:
             for key, value in row.items():
                 if key not in ("iteration", "frames") and value is not None and not (isinstance(value, float) and math.isnan(value)):
                     self.logger.log_scalar(key, value, step=self.frames)
-        self.progress.update(row, self.cfg.collector.frames_per_batch, force=last)
+        self.progress.update(row, self.cfg.collector.frames_per_batch, force=row["iteration"] == self.num_iterations)
 
     def state_dict(self) -> dict:
         return {

@@ -33,6 +33,7 @@ def validate_config(cfg):
     from ppo_torchrl.advantage import ESTIMATORS
     from ppo_torchrl.collectors import CHOICES, resolve_backend
     from ppo_torchrl.envs import env_spec
+    from ppo_torchrl.eval_worker import BACKGROUND_CHOICES
     from ppo_torchrl.loggers import LOGGERS
     from ppo_torchrl.losses import LOSSES, OPTIMIZERS, NOT_COMPILABLE
     from ppo_torchrl.models import validate_policy_config
@@ -64,6 +65,7 @@ def validate_config(cfg):
          f"collector.total_frames={c.total_frames} must be >= collector.frames_per_batch={c.frames_per_batch}"),
         one_of("collector.backend", c.backend, CHOICES),
         one_of("compile", compile_choice, COMPILE_CHOICES),
+        one_of("eval.background", str(cfg.eval.background).lower(), BACKGROUND_CHOICES),
         (not (compile_choice == "true" and loss.name in NOT_COMPILABLE),
          f"compile=true does not work with loss={loss.name}: {NOT_COMPILABLE.get(loss.name)}; use compile=auto or false"),
         one_of("optim.name", cfg.optim.name, OPTIMIZERS),

@@ -73,7 +73,7 @@ def test_resume_with_more_frames_and_stale_rows_are_dropped(tiny_cfg, tmp_path):
 
 def test_non_finite_loss_stops_with_a_clear_error_and_keeps_the_good_checkpoint(tiny_cfg, tmp_path):
     trainer = Trainer(tiny_cfg("collector.total_frames=1024", "checkpoint.every_frames=256"), tmp_path)
-    loss_step, calls = trainer.loss_step, {"n": 0}
+    loss_step, calls = trainer.minibatch_step.loss_step, {"n": 0}
 
     def poisoned(minibatch):  # the 3rd minibatch of the 2nd iteration goes non-finite
         loss, out = loss_step(minibatch)
@@ -82,7 +82,7 @@ def test_non_finite_loss_stops_with_a_clear_error_and_keeps_the_good_checkpoint(
             loss = loss * float("nan")
         return loss, out
 
-    trainer.loss_step = poisoned
+    trainer.minibatch_step.loss_step = poisoned
     with pytest.raises(TrainingError, match=r"non-finite loss at iteration 2 .*epoch 1, minibatch 3"):
         trainer.train()
     state = checkpoint.load(tmp_path / "checkpoints" / "last.pt")

@@ -1,13 +1,15 @@
 """Short real training runs on InvertedPendulum-v4 through every loss x policy head."""
 
+import csv
 import json
+import multiprocessing
 
 import pytest
 import torch
 
 from ppo_torchrl.collectors import FastCollector
-from ppo_torchrl.losses import make_loss_step
 from ppo_torchrl.losses import LOSS_INPUT_KEYS
+from ppo_torchrl.minibatch import EagerStep, FusedStep
 from ppo_torchrl.trainer import Trainer, use_compile
 
 LOSSES = ["clip_ppo", "kl_ppo", "ppo", "a2c", "reinforce"]
@@ -81,17 +83,76 @@ def test_same_seed_same_first_iterations(tiny_cfg, tmp_path):
     assert rows[0] == rows[1]
 
 
-@pytest.mark.parametrize("overrides", [[], ["loss=a2c", "policy=tanh_normal"]])
-def test_compiled_loss_step_matches_eager(tiny_cfg, tmp_path, overrides):
-    trainer = Trainer(tiny_cfg("compile=true", *overrides), tmp_path)
+def _steps_from_one_state(trainer, make_step, minibatches):
+    """Run `make_step()` over the minibatches from the trainer's initial weights and a fresh optimizer."""
+    start = [p.detach().clone() for p in trainer.params]
+    with torch.no_grad():
+        for p, p0 in zip(trainer.params, start):
+            p.copy_(p0)
+    trainer.optimizer.state.clear()
+    trainer.optimizer.param_groups[0]["lr"] = 1e-3
+    torch.manual_seed(0)
+    step = make_step()
+    metrics = torch.stack([step(mb.clone())[0] for mb in minibatches])
+    after = [p.detach().clone() for p in trainer.params]
+    state = {k: {n: v.clone() for n, v in s.items()} for k, s in trainer.optimizer.state_dict()["state"].items()}
+    with torch.no_grad():
+        for p, p0 in zip(trainer.params, start):
+            p.copy_(p0)
+    return metrics, after, state, step.metric_keys
+
+
+@pytest.mark.parametrize("overrides", [[], ["loss=a2c", "policy=tanh_normal", "loss.entropy_coef=0.01",
+                                            "optim=adamw", "optim.weight_decay=0.01"],
+                                       ["loss=ppo", "optim.weight_decay=0.01", "optim.max_grad_norm=null"]])
+def test_fused_step_is_the_eager_step(tiny_cfg, tmp_path, overrides):
+    """FusedStep (one function: torch.func gradients, clip, Adam on the optimizer's state) takes the same
+    steps as the TorchRL loss + backward + clip_grad_norm_ + torch.optim; here run eagerly, compiled below."""
+    trainer = Trainer(tiny_cfg("compile=false", *overrides), tmp_path)
     batch = trainer.collector.collect()
     trainer.prepare(batch)
-    minibatch = batch.reshape(-1)[:64].select(*LOSS_INPUT_KEYS, strict=False)
-    eager_loss, eager_out = make_loss_step(trainer.loss_module, True)(minibatch.clone())
-    compiled_loss, compiled_out = trainer.loss_step(minibatch.clone())
-    torch.testing.assert_close(compiled_loss, eager_loss, rtol=1e-4, atol=1e-5)
-    for key in eager_out.keys():
-        torch.testing.assert_close(compiled_out.get(key), eager_out.get(key), rtol=1e-4, atol=1e-5)
+    flat = batch.reshape(-1).select(*LOSS_INPUT_KEYS, strict=False)
+    minibatches = [flat[i * 32:(i + 1) * 32] for i in range(6)]
+    args = (trainer.loss_module, trainer.optimizer, trainer.params, True, trainer.cfg.optim.max_grad_norm)
+    eager = _steps_from_one_state(trainer, lambda: EagerStep(*args), minibatches)
+    fused = _steps_from_one_state(trainer, lambda: FusedStep(*args, compile=False), minibatches)
+    assert eager[3] == fused[3] and ("loss_objective" in fused[3] or "loss_actor" in fused[3])
+    torch.testing.assert_close(fused[0], eager[0], rtol=1e-4, atol=1e-5)
+    for a, b in zip(fused[1], eager[1]):
+        torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-6)
+    assert any(not torch.equal(a, p) for a, p in zip(fused[1], trainer.params)), "no parameter moved"
+    for key in eager[2]:
+        for name in ("step", "exp_avg", "exp_avg_sq"):
+            torch.testing.assert_close(fused[2][key][name], eager[2][key][name], rtol=1e-4, atol=1e-7)
+
+
+def test_fused_step_takes_no_step_from_a_non_finite_loss(tiny_cfg, tmp_path):
+    trainer = Trainer(tiny_cfg("compile=false"), tmp_path)
+    batch = trainer.collector.collect()
+    trainer.prepare(batch)
+    minibatch = batch.reshape(-1)[:64].select(*LOSS_INPUT_KEYS, strict=False).clone()
+    minibatch["advantage"][3] = float("nan")
+    step = FusedStep(trainer.loss_module, trainer.optimizer, trainer.params, True, 0.5, compile=False)
+    before = [p.detach().clone() for p in trainer.params]
+    metrics, grad_norm = step(minibatch)
+    assert not torch.isfinite(metrics[0] + grad_norm)
+    assert all(torch.equal(a, p) for a, p in zip(before, trainer.params))
+    assert all(float(s["step"]) == 0 for s in trainer.optimizer.state.values())
+
+
+def test_compiled_run_matches_its_eager_step(tiny_cfg, tmp_path):
+    trainer = Trainer(tiny_cfg("compile=true"), tmp_path)
+    assert isinstance(trainer.minibatch_step, FusedStep)
+    batch = trainer.collector.collect()
+    trainer.prepare(batch)
+    flat = batch.reshape(-1).select(*LOSS_INPUT_KEYS, strict=False)
+    minibatches = [flat[i * 64:(i + 1) * 64] for i in range(3)]
+    args = (trainer.loss_module, trainer.optimizer, trainer.params, True, trainer.cfg.optim.max_grad_norm)
+    eager = _steps_from_one_state(trainer, lambda: FusedStep(*args, compile=False), minibatches)
+    compiled = _steps_from_one_state(trainer, lambda: trainer.minibatch_step, minibatches)
+    torch.testing.assert_close(compiled[0], eager[0], rtol=1e-4, atol=1e-5)
+    for a, b in zip(compiled[1], eager[1]):
+        torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-6)
     assert trainer.train()["status"] == "finished"
 
 
@@ -101,3 +162,21 @@ def test_compile_auto_only_for_long_runs(tiny_cfg):
     assert not use_compile(tiny_cfg("collector.total_frames=1000000", "compile=false"))
     assert use_compile(tiny_cfg("compile=true"))
     assert not use_compile(tiny_cfg("collector.total_frames=1000000", "loss=kl_ppo"))  # not compilable
+
+
+def test_background_eval_writes_what_the_in_line_eval_writes(tiny_cfg, tmp_path):
+    """eval.background=true: the worker process evaluates the same weights with the same seeds; each row
+    waits for its eval, so metrics.csv holds the same values (timings aside) in the same order."""
+    tables = {}
+    for mode in ("false", "true"):
+        cfg = tiny_cfg("collector.total_frames=1024", "eval.every_frames=512", "eval.episodes=2",
+                       f"eval.background={mode}")
+        trainer = Trainer(cfg, tmp_path / mode)
+        assert trainer.train()["status"] == "finished"
+        assert trainer.evals is None if mode == "false" else trainer.evals is not None
+        with open(tmp_path / mode / "metrics.csv") as f:
+            tables[mode] = [{k: v for k, v in row.items() if k not in ("time_s", "sps")} for row in csv.DictReader(f)]
+    assert [row["eval/return_mean"] != "" for row in tables["true"]] == [False, True, False, True]
+    assert tables["true"] == tables["false"]
+    assert (tmp_path / "true" / "checkpoints" / "best.pt").is_file()
+    assert not multiprocessing.active_children()

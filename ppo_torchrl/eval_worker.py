@@ -1,0 +1,126 @@
+"""Periodic evaluations in a second process, so the training loop does not wait for them.
+
+`eval.background` (auto: runs of >= 150k frames in a process allowed two or more CPUs; true; false).
+At each eval point the trainer hands the worker the actor's weights and the frozen observation
+statistics of that frame and goes on training; the worker runs the same `evaluate_policy` (the same
+TorchRL env, statistics, episode seeds and deterministic actions) on the spare core. Rows of
+metrics.csv wait for their eval and are written in order once it is back, so the file reads as if
+the eval had run in line: its columns sit on the row of the frame it was taken at. The best
+checkpoint is the state of that frame. The final eval runs in line, after the pending ones are back.
+Only evaluation runs there: the training arithmetic stays on one core.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import queue
+import signal
+from typing import Callable, Dict, List
+
+from ppo_torchrl.errors import ConfigError
+
+BACKGROUND_AUTO_MIN_FRAMES = 150_000
+BACKGROUND_CHOICES = ("auto", "true", "false")
+
+
+def use_background_eval(cfg) -> bool:
+    choice = str(cfg.eval.background).lower()
+    if cfg.eval.every_frames <= 0 or choice == "false":
+        return False
+    spare_core = len(os.sched_getaffinity(0)) >= 2 if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1) >= 2
+    return choice == "true" or (cfg.collector.total_frames >= BACKGROUND_AUTO_MIN_FRAMES and spare_core)
+
+
+class BackgroundEval:
+    """The worker process, the evals it has not returned yet, and the metrics rows waiting for them."""
+
+    def __init__(self, cfg, write_row: Callable[[dict], None], on_result: Callable[[int, dict, object], dict]):
+        from omegaconf import OmegaConf
+
+        context = mp.get_context("spawn")  # a fresh interpreter: no forked torch or simulator state
+        self._jobs, self._results = context.Queue(), context.Queue()
+        self._process = context.Process(target=_serve, name="ppo_torchrl-eval", daemon=True,
+                                        args=(OmegaConf.to_container(cfg, resolve=True), self._jobs,
+                                              self._results, os.getpid()))
+        self._process.start()
+        self._write_row, self._on_result = write_row, on_result
+        self._pending: Dict[int, object] = {}  # frames -> what on_result gets back with the result
+        self._waiting: List[dict] = []  # rows logged while an earlier eval is out, in order
+
+    def submit(self, frames: int, job: dict, keep: object = None) -> None:
+        """Evaluate `job` (actor weights, obs stats, episodes, seed, deterministic, video path) for `frames`."""
+        self._pending[frames] = keep
+        self._jobs.put({"frames": frames, **job})
+
+    def log(self, row: dict) -> None:
+        """Write the row now, or once the evals before it (and its own) are back."""
+        self._waiting.append(row)
+        self.poll()
+
+    def poll(self, block: bool = False) -> None:
+        """Take the evals that are back; with block, wait for all of them."""
+        while self._pending:
+            try:
+                frames, result, error = self._results.get(block=block, timeout=1.0 if block else None)
+            except queue.Empty:
+                if not block:
+                    break
+                if not self._process.is_alive():
+                    raise RuntimeError(f"the background eval process exited (code {self._process.exitcode})")
+                continue
+            if error is not None:
+                name, message, config_error = error
+                raise ConfigError(message) if config_error else RuntimeError(f"background eval: {name}: {message}")
+            columns = self._on_result(frames, result, self._pending.pop(frames))
+            for row in self._waiting:
+                if row["frames"] == frames:
+                    row.update(columns)
+        while self._waiting and self._waiting[0]["frames"] not in self._pending:
+            self._write_row(self._waiting.pop(0))
+
+    def close(self) -> None:
+        """Stop the worker; rows still waiting are written without the evals that are not back."""
+        self._pending.clear()
+        self.poll()
+        try:
+            self._jobs.put(None)
+            self._process.join(timeout=5)
+        finally:
+            if self._process.is_alive():
+                self._process.terminate()
+                self._process.join()
+            self._jobs.close()
+            self._results.close()
+
+
+def _serve(cfg_dict: dict, jobs, results, parent_pid: int) -> None:
+    """The worker: one actor, rebuilt from the run's config; each job loads weights and evaluates."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole process group: the trainer decides
+    import torch
+    from omegaconf import OmegaConf
+
+    from ppo_torchrl.envs import env_spec, seed_everything
+    from ppo_torchrl.evaluate import evaluate_policy
+    from ppo_torchrl.models import make_actor_critic
+
+    torch.set_num_threads(1)
+    cfg = OmegaConf.create(cfg_dict)
+    ac = make_actor_critic(cfg.policy, env_spec(cfg.env), "cpu")
+    while True:
+        try:
+            job = jobs.get(timeout=1.0)
+        except queue.Empty:
+            if os.getppid() != parent_pid:  # the trainer is gone (killed): so is this worker
+                return
+            continue
+        if job is None:
+            return
+        try:
+            ac.actor.load_state_dict(job["actor"])
+            seed_everything(job["seed"])  # a stochastic eval draws from this process's own stream
+            result = evaluate_policy(cfg, ac, job["obs_stats"], job["episodes"], seed=job["seed"],
+                                     deterministic=job["deterministic"], video_path=job["video_path"], progress=False)
+            results.put((job["frames"], result, None))
+        except Exception as exc:  # noqa: BLE001  raised again in the trainer, as one line or as a bug
+            results.put((job["frames"], None, (type(exc).__name__, str(exc), isinstance(exc, ConfigError))))
