@@ -74,7 +74,7 @@ class LocomotionConfig:
     base_height_cost_weight: float = 0.0  # - w x (main_body's height above the terrain - base_height_target)^2
     base_height_target: Optional[float] = None  # m; null: main_body's height in the model's initial pose
     orientation_cost_weight: float = 0.0  # - w x (1 - cos of main_body's tilt from its initial attitude)
-    body_contact_cost_weight: float = 0.0  # - w x number of robot geoms other than feet touching the ground
+    body_contact_cost_weight: float = 0.0  # - w x number of geoms of non-foot bodies (trunk, thighs) on the ground
     feet_air_time_weight: float = 0.0  # + w x sum, over feet touching down, of (time in the air - feet_air_time_target)
     feet_air_time_target: float = 0.5  # s: swings shorter than this cost, longer ones pay (legged_gym: 0.5)
     # Floor each step's reward at 0 (legged_gym's only_positive_rewards): while the costs outweigh the
@@ -233,7 +233,9 @@ class EvalConfig:
     final_episodes: int = 10  # at the end of training; 0 disables
     deterministic: bool = True
     video: bool = False  # film the first episode of each eval into <run dir>/videos/ (MUJOCO_GL=egl)
-    success_x: Optional[float] = None  # also report the share of episodes that end beyond this x (m)
+    # Also report the share of episodes that end beyond this x (m). A step env (a model with a `step`
+    # body) reports its own instead: the main body env.terrain.success_margin beyond the step's edge.
+    success_x: Optional[float] = None
 
 
 @dataclass

@@ -236,7 +236,8 @@ def height_sweep(cfg, ac, obs_stats, heights: list[float], episodes: int, seed: 
 
     fig, ax = plt.subplots(figsize=(5.5, 3.8))
     ax.plot([r["step_height_m"] * 100 for r in rows], [r["success_rate"] * 100 for r in rows], "o-")
-    ax.set(xlabel="step height (cm)", ylabel=f"episodes that cross (%, of {episodes})", ylim=(-3, 103), title=title)
+    ax.set(xlabel="step height (cm)", ylabel=f"episodes that cross (%, of {episodes})", ylim=(-3, 103))
+    ax.set_title(title, fontsize=8)
     ax.grid(alpha=0.3)
     fig.tight_layout()
     fig.savefig(out_dir / SWEEP_FILES[1], dpi=120)
@@ -285,7 +286,7 @@ def main(argv: list[str]) -> dict:
     if heights:
         out_dir = Path(args["out"]) if args["out"] else run_dir / "eval"
         rows = height_sweep(cfg, ac, obs_stats, heights, args["episodes"], args["seed"], out_dir,
-                            f"{run_dir.name}: {label}"[:70])
+                            f"{run_dir.resolve().name}\n{label}")
         print(f"{label}: height sweep over {args['episodes']} episodes per height: "
               f"{out_dir / SWEEP_FILES[0]}, {out_dir / SWEEP_FILES[1]}")
         return {"heights": rows}

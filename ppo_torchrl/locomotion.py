@@ -29,7 +29,10 @@ configured (so a config without these keys steps exactly as Ant-v5 does):
   terrain heights at points ahead of the main body, computed from the known step geometry
   (the step's top where the point lies beyond its edge, else 0: the floor is at z = 0).
 - **Gait bookkeeping** for eval (`measure_gait = True`): stride frequency, duty factor, peak joint
-  speed and the share of time a non-foot geom touches the ground, sampled at every physics step.
+  speed and the share of time a non-foot body touches the ground, sampled at every physics step. A
+  non-foot body is a robot body that holds no foot geom: the trunk, a thigh; not the shank that
+  carries the foot (its capsule ends inside the foot sphere and touches whenever the foot sinks a
+  millimetre into the ground).
 - **Tracking camera**: a rendered model without a camera named `track` gets one on its main body.
 """
 
@@ -257,9 +260,12 @@ class LocomotionEnv(AntEnv):
                 parents = set(model.body_parentid[1:].tolist())
                 feet = [g for g in robot if model.geom_bodyid[g] not in parents]
         self.feet = np.array(feet, dtype=np.int64)
-        self._kind = np.zeros(model.ngeom, np.int8)  # 1 ground (static), 2 foot, 3 another geom of the robot
+        # 1 ground (static), 2 foot, 3 a geom of a robot body that holds no foot (a "non-foot body":
+        # the trunk, a thigh); 0 the rest, such as the shank capsule that ends inside the foot sphere.
+        self._kind = np.zeros(model.ngeom, np.int8)
         self._kind[model.body_weldid[model.geom_bodyid] == 0] = 1
-        self._kind[robot] = 3
+        foot_bodies = set(model.geom_bodyid[self.feet].tolist())
+        self._kind[[g for g in robot if model.geom_bodyid[g] not in foot_bodies]] = 3
         self._kind[self.feet] = 2
         self._foot_index = np.full(model.ngeom, -1, np.int64)
         self._foot_index[self.feet] = np.arange(len(self.feet))
@@ -389,7 +395,7 @@ class LocomotionEnv(AntEnv):
         mujoco.mj_rnePostConstraint(model, data)
 
     def _contacts(self) -> tuple:
-        """(a ground-contact flag per foot, the number of other robot geoms touching the ground)."""
+        """(a ground-contact flag per foot, the number of geoms of non-foot bodies touching the ground)."""
         pairs = self.data.contact.geom
         feet = np.zeros(len(self.feet), bool)
         if len(pairs) == 0:

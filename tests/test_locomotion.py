@@ -166,6 +166,7 @@ def test_contacts_and_height_samples_extend_the_observation():
     for _ in range(25):
         obs, *_ = seeing.step(np.zeros(12, np.float32))
     assert obs[-34:-30].tolist() == [1.0] * 4  # standing: four feet down
+    assert seeing.unwrapped._contacts()[1] == 0  # and no non-foot body (the shanks carry the feet)
 
 
 def test_heading_auto_makes_a_minus_x_model_move_forward(tmp_path):
