@@ -119,7 +119,7 @@ class GaitMeter:
             "stride_frequency": float(self.touchdowns.mean() / t) if self.n_feet else 0.0,  # Hz, per foot
             "duty_factor": float(self.contact_time.mean() / t) if self.n_feet else 0.0,  # share of time a foot is down
             "peak_joint_speed": float(self.peak_joint_speed),  # rad/s, actuated joints
-            "body_contact_share": float(self.body_contact_time / t),  # share of time a non-foot geom touches ground
+            "body_contact_share": float(self.body_contact_time / t),  # share of time a non-foot body touches ground
         }
 
 
