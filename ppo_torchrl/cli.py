@@ -46,7 +46,7 @@ def print_help(usage: str, arguments: Dict[str, Tuple[str, Any]], about: str = "
     width = max(len(name) for name in arguments) + 2
     for name, (meaning, default) in arguments.items():
         shown = str(default).lower() if isinstance(default, bool) else default
-        shown = "required" if default is None else f"default: {shown}"
+        shown = "required" if default is None else "default: none" if default == "" else f"default: {shown}"
         lines.append(f"  {name:<{width}}{meaning} ({shown})")
     print("\n".join(lines))
     raise SystemExit(0)

@@ -38,7 +38,8 @@ class TransformsConfig:
 
 @dataclass
 class LocomotionConfig:
-    """Reward and termination of an MJCF locomotion env (env=mjcf; Gymnasium Ant-v5's knobs)."""
+    """An MJCF locomotion env (env=mjcf; locomotion.py): Gymnasium Ant-v5's reward and termination knobs,
+    then heading, actuator limits and legged-locomotion reward terms (defaults: off, Ant-v5's behaviour)."""
 
     forward_reward_weight: float = 1.0  # x velocity of main_body, m/s
     healthy_reward: float = 1.0  # per step while main_body's z is inside healthy_z_range
@@ -50,6 +51,66 @@ class LocomotionConfig:
     reset_noise_scale: float = 0.1  # uniform noise on qpos, normal on qvel, at reset
     main_body: str = "1"  # body name or id whose x velocity is rewarded and z is checked
     contact_forces_in_observation: bool = False  # append cfrc_ext to the observation
+    # Which way is forward: the forward reward and eval's forward velocity are main_body's velocity
+    # along this ground direction. x (Gymnasium's: +x of the world), -x, y, -y, an angle in degrees
+    # counterclockwise from +x, or auto: main_body's own +x axis in the model's initial pose.
+    heading: str = "x"
+    # The forward reward counts speed up to this (m/s) and no more; null: all of it (Gymnasium's).
+    target_speed: Optional[float] = None
+    # Actuators (each must drive a joint; null: as the model file has them). locomotion.py explains the choice.
+    torque_limit: Optional[float] = None  # N m: every actuator's peak joint torque (its forcerange)
+    # rad/s: the drive's torque-speed line, net driving torque <= torque_limit x (1 - speed / this):
+    # joint damping of torque_limit / joint_speed_limit on each actuated joint (a motor's back-EMF,
+    # integrated implicitly), so no actuator drives its joint past this speed. Needs a torque limit.
+    joint_speed_limit: Optional[float] = None
+    kp: Optional[float] = None  # N m/rad: stiffness of the position actuators (the P of the PD servo)
+    kd: Optional[float] = None  # N m s/rad: their damping (the D of the servo, inside the torque limit)
+    armature: Optional[float] = None  # kg m^2: reflected rotor inertia of each actuated joint
+    # Legged-locomotion reward terms (legged_gym's set), per control step, each times its weight (0: off):
+    torque_cost_weight: float = 0.0  # - w x sum of actuator torque^2 (N^2 m^2)
+    joint_speed_cost_weight: float = 0.0  # - w x sum of actuated joint speed^2 ((rad/s)^2)
+    action_rate_cost_weight: float = 0.0  # - w x sum of (action - previous action)^2
+    foot_slip_cost_weight: float = 0.0  # - w x sum over feet on the ground of their horizontal speed^2 ((m/s)^2)
+    base_height_cost_weight: float = 0.0  # - w x (main_body's height above the terrain - base_height_target)^2
+    base_height_target: Optional[float] = None  # m; null: main_body's height in the model's initial pose
+    orientation_cost_weight: float = 0.0  # - w x (1 - cos of main_body's tilt from its initial attitude)
+    body_contact_cost_weight: float = 0.0  # - w x number of geoms of non-foot bodies (trunk, thighs) on the ground
+    feet_air_time_weight: float = 0.0  # + w x sum, over feet touching down, of (time in the air - feet_air_time_target)
+    feet_air_time_target: float = 0.5  # s: swings shorter than this cost, longer ones pay (legged_gym: 0.5)
+    # Floor each step's reward at 0 (legged_gym's only_positive_rewards): while the costs outweigh the
+    # forward and healthy rewards (early, exploring), ending the episode by a fall does not pay.
+    only_positive_rewards: bool = False
+    # The feet (geom names), for contacts, slip, air time and gait figures; empty: the geoms whose name
+    # contains "foot", else every geom of a body without child bodies.
+    foot_geoms: List[str] = field(default_factory=list)
+
+
+@dataclass
+class TerrainConfig:
+    """The step of a step env, set per episode, and what the policy perceives (locomotion.py).
+
+    Step keys need a model with a body named `step` holding one box geom (env=quadruped_step); with
+    none of them set the step stays where the model file puts it. The observation keys work on any model.
+    """
+
+    step_height: Optional[float] = None  # m: every episode's step height (wins over the range and curriculum)
+    step_height_range: Optional[List[float]] = None  # [min, max] m: each episode's height is drawn uniformly
+    # Draw from [min, level] instead, level starting at min and rising by curriculum_step (up to max)
+    # each time the success rate of the last curriculum_window training episodes reaches curriculum_threshold.
+    curriculum: bool = False
+    curriculum_threshold: float = 0.8
+    curriculum_window: int = 20  # episodes
+    curriculum_step: float = 0.02  # m
+    step_distance: Optional[List[float]] = None  # [min, max] m from main_body's start to the edge, drawn per episode
+    success_margin: float = 0.5  # m: an episode succeeds when main_body ends this far beyond the edge
+    # Evaluation envs (periodic eval, evaluate): this fixed height unless step_height is set; null:
+    # drawn from step_height_range over its whole width (no curriculum in eval).
+    eval_step_height: Optional[float] = None
+    observe_contacts: bool = False  # append a 0/1 ground-contact flag per foot to the observation
+    # Append the terrain height (m, from the known step geometry: the step's top beyond its edge, else
+    # 0) at this many points along +x, height_sample_spacing apart, the first under main_body. 0: blind.
+    height_samples: int = 0
+    height_sample_spacing: float = 0.1  # m
 
 
 @dataclass
@@ -63,6 +124,7 @@ class EnvConfig:
     # the name of a model shipped in ppo_torchrl/assets (quadruped.xml, quadruped_step.xml).
     xml_file: Optional[str] = None
     locomotion: LocomotionConfig = field(default_factory=LocomotionConfig)
+    terrain: TerrainConfig = field(default_factory=TerrainConfig)
     transforms: TransformsConfig = field(default_factory=TransformsConfig)
 
 
@@ -171,7 +233,9 @@ class EvalConfig:
     final_episodes: int = 10  # at the end of training; 0 disables
     deterministic: bool = True
     video: bool = False  # film the first episode of each eval into <run dir>/videos/ (MUJOCO_GL=egl)
-    success_x: Optional[float] = None  # also report the share of episodes that end beyond this x (m)
+    # Also report the share of episodes that end beyond this x (m). A step env (a model with a `step`
+    # body) reports its own instead: the main body env.terrain.success_margin beyond the step's edge.
+    success_x: Optional[float] = None
     # Periodic evals in a second process (eval_worker.py) while training goes on: auto | true | false.
     # auto: runs of >= 150k frames in a process allowed >= 2 CPUs. metrics.csv reads the same either way.
     background: str = "auto"

@@ -44,6 +44,9 @@ CONF_ENV_DIR = Path(__file__).resolve().parent.parent / "conf" / "env"
 ASSETS_DIR = Path(__file__).resolve().parent / "assets"
 MJCF_ID = "mjcf"  # env.id of a robot given by its model file (env=mjcf env.xml_file=...)
 MJCF_ENV_ID = "Ant-v5"  # Gymnasium's locomotion class that runs it: it takes any model through xml_file
+# env.terrain keys that do something (the rest only tune these)
+TERRAIN_KNOBS = ("step_height", "step_height_range", "curriculum", "step_distance", "eval_step_height",
+                 "observe_contacts", "height_samples")
 TRACKING_CAMERA = "track"  # videos use a model camera of this name when there is one (it can follow the robot)
 
 
@@ -143,8 +146,13 @@ def mjcf_kwargs(env_cfg) -> dict:
         raise ConfigError(f"env.locomotion.main_body={loco.main_body} is not a body of {path.name} "
                           f"(a body name, e.g. {named}, or an id in 1..{len(info.bodies) - 1})")
     kwargs = {"camera_name": TRACKING_CAMERA} if TRACKING_CAMERA in info.cameras else {}
+    from ppo_torchrl.locomotion import LEGGED_KEYS
+
     return {
         **kwargs,
+        # locomotion.py: heading, actuator limits, legged reward terms; terrain and observation extras
+        "legged": {key: _plain(loco.get(key)) for key in LEGGED_KEYS},
+        "terrain": _plain(env_cfg.get("terrain")) or {},
         "xml_file": str(path),
         "forward_reward_weight": loco.forward_reward_weight,
         "healthy_reward": loco.healthy_reward,
@@ -159,12 +167,30 @@ def mjcf_kwargs(env_cfg) -> dict:
     }
 
 
-def gym_make_kwargs(env_cfg, render_mode: Optional[str] = None, **render_kwargs) -> dict:
-    """What `gymnasium.make(env.id, ...)` gets: the MJCF model and knobs, time limit, make_kwargs."""
+def _plain(value):
+    """An OmegaConf node as plain Python (dicts, lists), anything else as is."""
+    from omegaconf import OmegaConf
+
+    return OmegaConf.to_container(value, resolve=True) if OmegaConf.is_config(value) else value
+
+
+def gym_make_kwargs(env_cfg, render_mode: Optional[str] = None, evaluation: bool = False, **render_kwargs) -> dict:
+    """What `gymnasium.make(env.id, ...)` gets: the MJCF model and knobs, time limit, make_kwargs.
+    evaluation: an eval env (terrain: env.terrain.eval_step_height, no curriculum)."""
     check_env_id(env_cfg.id)
     if env_cfg.id == MJCF_ID and not env_cfg.get("xml_file"):
         raise ConfigError("env=mjcf needs the robot's model file: env.xml_file=<path to an MJCF file with a free joint>")
     kwargs = mjcf_kwargs(env_cfg) if env_cfg.get("xml_file") else {}
+    if kwargs:
+        kwargs["evaluation"] = evaluation
+    else:
+        from ppo_torchrl.config import TerrainConfig
+
+        terrain, default = env_cfg.get("terrain") or {}, TerrainConfig()
+        changed = [k for k in terrain if k in TERRAIN_KNOBS and _plain(terrain[k]) != getattr(default, k)]
+        if changed:
+            raise ConfigError(f"env.terrain.{changed[0]} works on MJCF robots (env=mjcf, env=quadruped_step), "
+                              f"not env.id={env_cfg.id}")
     kwargs.update(env_cfg.make_kwargs or {})
     if env_cfg.max_episode_steps is not None:
         kwargs["max_episode_steps"] = env_cfg.max_episode_steps
@@ -173,11 +199,19 @@ def gym_make_kwargs(env_cfg, render_mode: Optional[str] = None, **render_kwargs)
     return kwargs
 
 
-def make_gym_env(env_cfg, render_mode: Optional[str] = None, **render_kwargs) -> gym.Env:
-    kwargs = gym_make_kwargs(env_cfg, render_mode, **render_kwargs)
+def make_gym_env(env_cfg, render_mode: Optional[str] = None, evaluation: bool = False, **render_kwargs) -> gym.Env:
+    kwargs = gym_make_kwargs(env_cfg, render_mode, evaluation, **render_kwargs)
+    env_id = env_cfg.id
+    if env_cfg.get("xml_file"):  # an MJCF robot: Ant-v5's class with locomotion.py's additions
+        from ppo_torchrl.locomotion import LOCOMOTION_ID, register
+
+        register()
+        env_id = LOCOMOTION_ID
     # The passive checker re-validates every step; the id is checked once above instead.
     try:
-        env = gym.make(MJCF_ENV_ID if env_cfg.id == MJCF_ID else env_cfg.id, disable_env_checker=True, **kwargs)
+        env = gym.make(env_id, disable_env_checker=True, **kwargs)
+    except ConfigError:
+        raise
     except (gym.error.Error, ImportError, TypeError, ValueError) as exc:  # a missing extra, a bad make_kwargs
         first = next((l.strip() for l in str(exc).splitlines() if l.strip()), "")
         raise ConfigError(f"cannot make env '{env_cfg.id}': {type(exc).__name__}: {first}") from None
@@ -279,8 +313,9 @@ class ResumableReset(gym.Wrapper):
         return self.last_obs, reward, terminated, truncated, info
 
 
-def _gym_env(env_cfg, render_mode: Optional[str], render_kwargs: dict, resumable: Optional[list]) -> gym.Env:
-    env = make_gym_env(env_cfg, render_mode, **render_kwargs)
+def _gym_env(env_cfg, render_mode: Optional[str], render_kwargs: dict, resumable: Optional[list],
+             evaluation: bool = False) -> gym.Env:
+    env = make_gym_env(env_cfg, render_mode, evaluation, **render_kwargs)
     if resumable is not None:
         env = ResumableReset(env)
         resumable.append(env)
@@ -312,9 +347,9 @@ def make_torchrl_env(
     # The same gymnasium env the fast collector steps, wrapped (GymEnv(id, frame_skip=...) would take
     # frame_skip as its own action repeat instead of passing it to the MuJoCo env).
     if num_envs == 1:
-        base = GymWrapper(_gym_env(env_cfg, render_mode, render_kwargs, resumable), device=device)
+        base = GymWrapper(_gym_env(env_cfg, render_mode, render_kwargs, resumable, not train), device=device)
     else:  # one batched env over Gymnasium's vector env: one process, no per-env TensorDict (2.7x SerialEnv)
-        make = functools.partial(_gym_env, env_cfg, render_mode, render_kwargs, resumable)
+        make = functools.partial(_gym_env, env_cfg, render_mode, render_kwargs, resumable, not train)
         vector = gym.vector.SyncVectorEnv([make] * num_envs, autoreset_mode=gym.vector.AutoresetMode.DISABLED)
         base = GymWrapper(vector, device=device)
     transforms = []
@@ -414,6 +449,8 @@ def get_env_state(env: gym.Env) -> dict:
     """What a bit-exact continuation of this episode needs: the MuJoCo integration state
     (qpos, qvel, act, time, warm start), the time-limit counter and the env's RNG."""
     state = {"np_random": env.unwrapped.np_random.bit_generator.state}
+    if hasattr(env.unwrapped, "get_extra_state"):  # locomotion.py: the step, curriculum, last action, air times
+        state["extra"] = env.unwrapped.get_extra_state()
     limit = _find_wrapper(env, gym.wrappers.TimeLimit)
     if limit is not None:
         state["elapsed_steps"] = limit._elapsed_steps
@@ -442,3 +479,5 @@ def set_env_state(env: gym.Env, state: dict) -> None:
             raise ConfigError("the checkpoint's simulator state does not fit this env's model")
         mujoco.mj_setState(model, data, state["mujoco"], spec)
         mujoco.mj_forward(model, data)
+    if "extra" in state and hasattr(env.unwrapped, "set_extra_state"):
+        env.unwrapped.set_extra_state(state["extra"])

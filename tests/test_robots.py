@@ -27,7 +27,7 @@ def test_mjcf_runs_a_model_it_was_not_tuned_for(tiny_cfg, tmp_path):
     cfg = tiny_cfg("env=mjcf", f"env.xml_file={GYM_ANT_XML}", "env.locomotion.frame_skip=5",
                    "env.max_episode_steps=100")
     env = make_gym_env(cfg.env)
-    assert env.unwrapped.fullpath == str(GYM_ANT_XML) and env.unwrapped.frame_skip == 5
+    assert Path(env.unwrapped.fullpath) == GYM_ANT_XML.resolve() and env.unwrapped.frame_skip == 5
     assert env.observation_space.shape == (27,) and env.action_space.shape == (8,)  # no contact forces
     summary = Trainer(cfg, tmp_path).train()
     assert summary["env"] == "mjcf:ant.xml" and summary["frames"] == 512
@@ -75,13 +75,17 @@ def test_quadruped_model_is_a_19kg_12dof_robot_that_stands():
     assert data.qpos[2] > 0.38
 
 
-def test_step_env_has_a_15cm_step_ahead(tiny_cfg):
-    env = make_gym_env(tiny_cfg("env=quadruped_step").env)
-    model = env.unwrapped.model
+def test_step_model_has_a_15cm_step_ahead(tiny_cfg):
+    """The model file's own step (what runs made before env.terrain see): 15 cm, 2 m ahead."""
+    env = make_gym_env(tiny_cfg("env=mjcf", "env.xml_file=quadruped_step.xml", "env.locomotion.main_body=trunk").env)
+    env.reset(seed=0)
+    model, data = env.unwrapped.model, env.unwrapped.data
     step = model.geom("step")
-    top, edge = model.geom_pos[step.id][2] + model.geom_size[step.id][2], model.geom_pos[step.id][0] - model.geom_size[step.id][0]
-    assert top == pytest.approx(0.15) and 1.0 < edge < 4.0
+    top = data.geom_xpos[step.id][2] + model.geom_size[step.id][2]
+    edge = data.geom_xpos[step.id][0] - model.geom_size[step.id][0]
+    assert top == pytest.approx(0.15) and edge == pytest.approx(2.0)
     assert model.geom_size[step.id][1] >= 40  # too wide to walk around in an episode
+    assert model.body("trunk").id == 1  # the step body comes after the robot: its body ids are quadruped.xml's
 
 
 def test_init_from_transfers_weights_stats_and_optimizer(tiny_cfg, tmp_path):

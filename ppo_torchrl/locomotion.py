@@ -1,0 +1,512 @@
+"""The locomotion env of MJCF robots (env=mjcf, env=quadruped, env=quadruped_step).
+
+`LocomotionEnv` is Gymnasium's Ant-v5 class (any model through `xml_file`) with, each off unless
+configured (so a config without these keys steps exactly as Ant-v5 does):
+
+- **Heading** (`env.locomotion.heading`): the forward reward and eval's forward velocity are the main
+  body's velocity along this ground direction, not +x of the world.
+- **Actuation** (`torque_limit`, `joint_speed_limit`, `kp`, `kd`, `armature`): the model's actuators
+  are rewritten at build time. The speed limit is the drive's torque-speed line,
+  torque <= torque_limit x (1 - speed / joint_speed_limit): a torque source behind a viscous loss of
+  torque_limit / joint_speed_limit (a DC motor's back-EMF), so it is joint damping of that size added
+  to each actuated joint, which MuJoCo integrates implicitly (`implicitfast`). Chosen over clipping
+  the torque by the speed before each physics step: with these light legs a full-torque physics step
+  (5 ms) can add several rad/s, so random actions drove joints well past the limit through that
+  clip, while the damping holds them under it (tests/test_locomotion.py runs such a rollout; the
+  model's own joint damping adds margin). Outside forces (a fall, an impact) can still push a joint
+  past the limit, which eval's peak joint speed would show.
+- **Reward terms** of legged-locomotion practice (legged_gym's set, weights per control step):
+  joint torque, joint speed, action rate, foot slip, base height and orientation, feet air time,
+  non-foot contacts; `target_speed` caps the rewarded forward speed; `only_positive_rewards` floors
+  each step's reward at 0, as legged_gym does, so that while the costs outweigh the rest an early fall
+  does not pay.
+- **Terrain** (`env.terrain.*`, models with a body named `step` holding one box geom): the step's
+  height and distance drawn per episode, from a range that a success-driven curriculum widens.
+  The step is moved by `model.body_pos` at reset (no recompile; moving a geom of the world body
+  instead leaves MuJoCo's collision bounding volumes stale). Its box reaches below the floor, so any
+  height from 0 to the box's depth is a solid step.
+- **Observation extras** (opt-in, the policy is blind by default): one 0/1 ground-contact flag per foot;
+  terrain heights at points ahead of the main body, computed from the known step geometry
+  (the step's top where the point lies beyond its edge, else 0: the floor is at z = 0).
+- **Gait bookkeeping** for eval (`measure_gait = True`): stride frequency, duty factor, peak joint
+  speed and the share of time a non-foot body touches the ground, sampled at every physics step. A
+  non-foot body is a robot body that holds no foot geom: the trunk, a thigh; not the shank that
+  carries the foot (its capsule ends inside the foot sphere and touches whenever the foot sinks a
+  millimetre into the ground).
+- **Tracking camera**: a rendered model without a camera named `track` gets one on its main body.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from typing import Optional
+
+import mujoco
+import numpy as np
+from gymnasium import utils
+from gymnasium.envs.mujoco.ant_v5 import AntEnv
+from gymnasium.spaces import Box
+
+from ppo_torchrl.errors import ConfigError
+
+LOCOMOTION_ID = "ppo_torchrl/Locomotion-v0"
+STEP_BODY = "step"  # terrain models: the static body that holds the step's box geom
+HEADINGS = {"x": 0.0, "-x": 180.0, "y": 90.0, "-y": 270.0}
+MIN_AIR_S = 0.02  # gait: a touchdown counts after at least this long in the air (contact chatter is not a stride)
+
+# Keys of env.locomotion that LocomotionEnv takes (the others are Ant-v5's own arguments).
+LEGGED_KEYS = ("heading", "target_speed", "torque_limit", "joint_speed_limit", "kp", "kd", "armature",
+               "torque_cost_weight", "joint_speed_cost_weight", "action_rate_cost_weight", "foot_slip_cost_weight",
+               "base_height_cost_weight", "base_height_target", "orientation_cost_weight", "body_contact_cost_weight",
+               "feet_air_time_weight", "feet_air_time_target", "foot_geoms", "only_positive_rewards")
+TERRAIN_STEP_KEYS = ("step_height", "step_height_range", "step_distance")
+
+
+def register() -> None:
+    import gymnasium as gym
+
+    if LOCOMOTION_ID not in gym.registry:
+        gym.register(id=LOCOMOTION_ID, entry_point="ppo_torchrl.locomotion:LocomotionEnv", max_episode_steps=1000)
+
+
+def heading_angle(heading) -> Optional[float]:
+    """Degrees from +x for x, -x, y, -y or a number; None for auto. ConfigError otherwise."""
+    text = str(heading).strip()
+    if text == "auto":
+        return None
+    if text in HEADINGS:
+        return HEADINGS[text]
+    try:
+        angle = float(text)
+    except ValueError:
+        raise ConfigError(f"env.locomotion.heading={heading} is not known; use x, -x, y, -y, auto (the main body's "
+                          "own +x axis) or an angle in degrees from +x") from None
+    if not math.isfinite(angle):
+        raise ConfigError(f"env.locomotion.heading={heading} must be a finite angle in degrees")
+    return angle
+
+
+class GaitMeter:
+    """Per episode: foot contacts, touchdowns, peak joint speed, non-foot ground contact, sampled each physics step."""
+
+    def __init__(self, n_feet: int):
+        self.n_feet = n_feet
+        self.reset()
+
+    def reset(self) -> None:
+        self.time = 0.0
+        self.contact_time = np.zeros(self.n_feet)
+        self.air_time = np.zeros(self.n_feet)
+        self.touchdowns = np.zeros(self.n_feet, np.int64)
+        self.previous = None
+        self.peak_joint_speed = 0.0
+        self.body_contact_time = 0.0
+
+    def add(self, feet: np.ndarray, joint_speed: float, body_contact: bool, dt: float) -> None:
+        if self.previous is not None:
+            self.touchdowns += feet & ~self.previous & (self.air_time >= MIN_AIR_S)
+        self.air_time = np.where(feet, 0.0, self.air_time + dt)
+        self.previous = feet
+        self.time += dt
+        self.contact_time += dt * feet
+        self.peak_joint_speed = max(self.peak_joint_speed, joint_speed)
+        self.body_contact_time += dt * body_contact
+
+    def summary(self) -> dict:
+        t = max(self.time, 1e-9)
+        return {
+            "stride_frequency": float(self.touchdowns.mean() / t) if self.n_feet else 0.0,  # Hz, per foot
+            "duty_factor": float(self.contact_time.mean() / t) if self.n_feet else 0.0,  # share of time a foot is down
+            "peak_joint_speed": float(self.peak_joint_speed),  # rad/s, actuated joints
+            "body_contact_share": float(self.body_contact_time / t),  # share of time a non-foot body touches ground
+        }
+
+
+class LocomotionEnv(AntEnv):
+    """Ant-v5 over any MJCF model, plus heading, actuation limits, reward terms, terrain and gait (module doc)."""
+
+    def __init__(self, xml_file: str, legged: Optional[dict] = None, terrain: Optional[dict] = None,
+                 evaluation: bool = False, **ant_kwargs):
+        legged, terrain = dict(legged or {}), dict(terrain or {})
+        self._legged, self._terrain_cfg, self._evaluation = legged, terrain, evaluation
+        self._add_track_camera = False
+        if ant_kwargs.get("render_mode") is not None and "camera_name" not in ant_kwargs and "camera_id" not in ant_kwargs:
+            probe = mujoco.MjModel.from_xml_path(str(xml_file))
+            names = [probe.camera(i).name for i in range(probe.ncam)]
+            self._add_track_camera = "track" not in names
+            ant_kwargs["camera_name"] = "track"
+        super().__init__(xml_file=xml_file, **ant_kwargs)
+        utils.EzPickle.__init__(self, xml_file, legged, terrain, evaluation, **ant_kwargs)
+        model, data = self.model, self.data
+        self._body_id = data.body(self._main_body).id
+        mujoco.mj_kinematics(model, data)  # the model's initial pose (reset computes it again)
+        self._init_z = float(data.xpos[self._body_id][2])
+        self._up0 = data.xmat[self._body_id].reshape(3, 3)[2].copy()  # world up in the body frame at the start
+        angle = heading_angle(legged.get("heading", "x"))
+        if angle is None:  # auto: the main body's +x axis, on the ground
+            axis = data.xmat[self._body_id].reshape(3, 3)[:2, 0]
+            if np.linalg.norm(axis) < 1e-6:
+                raise ConfigError("env.locomotion.heading=auto: the main body's +x axis points straight up or down; "
+                                  "give the heading as x, -x, y, -y or an angle")
+            self.heading = axis / np.linalg.norm(axis)
+        else:
+            self.heading = np.array([math.cos(math.radians(angle)), math.sin(math.radians(angle))])
+        self._heading_is_x = angle == 0.0
+        self._set_up_actuators(legged)
+        self._set_up_contacts(legged.get("foot_geoms") or [])
+        self._set_up_terrain(terrain, evaluation)
+        self._w = {k: float(legged.get(k) or 0.0) for k in LEGGED_KEYS if k.endswith("_weight")}
+        self._target_speed = legged.get("target_speed")
+        self._positive_only = bool(legged.get("only_positive_rewards"))
+        self._air_target = float(legged.get("feet_air_time_target", 0.5))
+        target = legged.get("base_height_target")
+        self._height_target = self._init_z if target is None else float(target)
+        self._needs_contacts = bool(self.observe_contacts or self._w["foot_slip_cost_weight"]
+                                    or self._w["feet_air_time_weight"] or self._w["body_contact_cost_weight"])
+        self.measure_gait = False  # evaluate sets it: gait figures sampled every physics step
+        self.gait = GaitMeter(len(self.feet))
+        self._reset_episode_memory()
+        extra = len(self.feet) * self.observe_contacts + self.height_samples
+        if extra:
+            size = self.observation_space.shape[0] + extra
+            self.observation_space = Box(low=-np.inf, high=np.inf, shape=(size,), dtype=np.float64)
+
+    # -- model set-up --------------------------------------------------------------------------------
+    def _initialize_simulation(self):
+        if not self._add_track_camera:
+            return super()._initialize_simulation()
+        spec = mujoco.MjSpec.from_file(self.fullpath)
+        plain = spec.compile()
+        body = plain.body(self._main_body)
+        data = mujoco.MjData(plain)
+        mujoco.mj_kinematics(plain, data)
+        sub = [g for g in range(plain.ngeom) if plain.body_rootid[plain.geom_bodyid[g]] == plain.body_rootid[body.id]]
+        origin = data.xpos[body.id]
+        extent = max([np.linalg.norm(data.geom_xpos[g] - origin) + plain.geom_rbound[g] for g in sub] or [0.5])
+        heading = self._camera_heading(plain, data, body.id)
+        left = np.array([-heading[1], heading[0], 0.0])
+        forward = np.array([heading[0], heading[1], 0.0])
+        distance = 4.0 * extent
+        offset = -distance * left + 0.15 * distance * forward + np.array([0, 0, distance / 3])
+        z_axis = offset / np.linalg.norm(offset)  # the camera looks along -z, at the body
+        y_axis = np.cross(z_axis, forward)
+        rotation = data.xmat[body.id].reshape(3, 3)  # world from body: the camera is given in the body's frame
+        target = spec.body(plain.body(body.id).name) if plain.body(body.id).name else None
+        if target is None:  # an unnamed main body: no camera to add; render from the free camera
+            self._add_track_camera = False
+            return super()._initialize_simulation()
+        target.add_camera(name="track", mode=mujoco.mjtCamLight.mjCAMLIGHT_TRACKCOM, pos=rotation.T @ offset,
+                          xyaxes=np.concatenate([rotation.T @ forward, rotation.T @ y_axis]))
+        model = spec.compile()
+        model.vis.global_.offwidth = max(model.vis.global_.offwidth, self.width)
+        model.vis.global_.offheight = max(model.vis.global_.offheight, self.height)
+        return model, mujoco.MjData(model)
+
+    def _camera_heading(self, model, data, body_id) -> np.ndarray:
+        angle = heading_angle(self._legged.get("heading", "x"))
+        if angle is None:
+            axis = data.xmat[body_id].reshape(3, 3)[:2, 0]
+            return axis / max(np.linalg.norm(axis), 1e-9)
+        return np.array([math.cos(math.radians(angle)), math.sin(math.radians(angle))])
+
+    def _set_up_actuators(self, legged: dict) -> None:
+        model = self.model
+        limit, speed = legged.get("torque_limit"), legged.get("joint_speed_limit")
+        kp, kd, armature = legged.get("kp"), legged.get("kd"), legged.get("armature")
+        actuated = [model.actuator_trnid[i, 0] for i in range(model.nu)
+                    if model.actuator_trntype[i] == mujoco.mjtTrn.mjTRN_JOINT]
+        self._act_dofs = np.array([model.jnt_dofadr[j] for j in actuated], dtype=np.int64)
+        if any(v is not None for v in (limit, speed, kp, kd, armature)) and len(actuated) != model.nu:
+            raise ConfigError("env.locomotion torque/speed limits and gains need every actuator to drive a joint "
+                              "(transmission 'joint'); this model has other transmissions")
+        gear = np.abs(model.actuator_gear[:, 0]) if model.nu else np.ones(0)
+        gear[gear == 0] = 1.0
+        if limit is not None:
+            model.actuator_forcelimited[:] = 1
+            model.actuator_forcerange[:] = np.stack([-limit / gear, limit / gear], axis=1)
+        if kp is not None or kd is not None:
+            servo = (model.actuator_biastype == mujoco.mjtBias.mjBIAS_AFFINE) & np.isclose(
+                model.actuator_biasprm[:, 1], -model.actuator_gainprm[:, 0])
+            if not servo.all():
+                raise ConfigError("env.locomotion.kp / kd set position-servo gains, but this model has actuators that "
+                                  "are not position actuators")
+            if kp is not None:
+                model.actuator_gainprm[:, 0] = kp
+                model.actuator_biasprm[:, 1] = -kp
+            if kd is not None:
+                model.actuator_biasprm[:, 2] = -kd
+        if armature is not None:
+            model.dof_armature[self._act_dofs] = armature
+        if speed is not None:  # the torque-speed line as damping: the net drive torque is 0 at the limit
+            if not model.actuator_forcelimited.all():
+                raise ConfigError("env.locomotion.joint_speed_limit needs a torque limit: set env.locomotion.torque_limit "
+                                  "(or forcerange on every actuator)")
+            peak = np.abs(model.actuator_forcerange).max(axis=1) * gear
+            model.dof_damping[self._act_dofs] += peak / speed
+
+    def _set_up_contacts(self, names) -> None:
+        model = self.model
+        root = model.body_rootid[self._body_id]
+        robot = [g for g in range(model.ngeom) if model.body_rootid[model.geom_bodyid[g]] == root]
+        if names:
+            missing = [n for n in names if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, n) < 0]
+            if missing:
+                raise ConfigError(f"env.locomotion.foot_geoms: {', '.join(missing)} is not a geom of the model")
+            feet = [model.geom(n).id for n in names]
+        else:
+            feet = [g for g in robot if "foot" in model.geom(g).name.lower()]
+            if not feet:  # the geoms of the bodies that have no child body
+                parents = set(model.body_parentid[1:].tolist())
+                feet = [g for g in robot if model.geom_bodyid[g] not in parents]
+        self.feet = np.array(feet, dtype=np.int64)
+        # 1 ground (static), 2 foot, 3 a geom of a robot body that holds no foot (a "non-foot body":
+        # the trunk, a thigh); 0 the rest, such as the shank capsule that ends inside the foot sphere.
+        self._kind = np.zeros(model.ngeom, np.int8)
+        self._kind[model.body_weldid[model.geom_bodyid] == 0] = 1
+        foot_bodies = set(model.geom_bodyid[self.feet].tolist())
+        self._kind[[g for g in robot if model.geom_bodyid[g] not in foot_bodies]] = 3
+        self._kind[self.feet] = 2
+        self._foot_index = np.full(model.ngeom, -1, np.int64)
+        self._foot_index[self.feet] = np.arange(len(self.feet))
+
+    def _set_up_terrain(self, terrain: dict, evaluation: bool) -> None:
+        model = self.model
+        self.observe_contacts = bool(terrain.get("observe_contacts", False))
+        self.height_samples = int(terrain.get("height_samples") or 0)
+        self._sample_spacing = float(terrain.get("height_sample_spacing") or 0.1)
+        self._step_id = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, STEP_BODY)
+        asked = [k for k in TERRAIN_STEP_KEYS + ("eval_step_height",) if terrain.get(k) is not None]
+        if terrain.get("curriculum"):
+            asked.append("curriculum")
+        self.has_step = self._step_id > 0
+        if asked and not self.has_step:
+            raise ConfigError(f"env.terrain.{asked[0]} needs a model with a body named '{STEP_BODY}' holding the step's "
+                              "box: env=quadruped_step, or env.xml_file=quadruped_step.xml to put the quadruped on it")
+        self.success_margin = float(terrain.get("success_margin", 0.5))
+        if not self.has_step:
+            return
+        geoms = [g for g in range(model.ngeom) if model.geom_bodyid[g] == self._step_id]
+        if len(geoms) != 1 or model.geom_type[geoms[0]] != mujoco.mjtGeom.mjGEOM_BOX:
+            raise ConfigError(f"the model's body '{STEP_BODY}' must hold one box geom (the step)")
+        g = geoms[0]
+        self._half = model.geom_size[g].copy()  # the box's half sizes
+        self._box_offset = model.geom_pos[g].copy()
+        self._start_x = float(self.data.xpos[self._body_id][0])
+        self._step_pos0 = model.body_pos[self._step_id].copy()
+        self.step_height, self.step_edge = self._read_step()
+        self.model_step = (self.step_height, self.step_edge - self._start_x)  # as the model file has it
+        fixed = terrain.get("step_height")
+        if evaluation and fixed is None:
+            fixed = terrain.get("eval_step_height")
+        self._fixed_height = None if fixed is None else float(fixed)
+        span = terrain.get("step_height_range")
+        self._height_range = None if span is None else (float(span[0]), float(span[1]))
+        self._curriculum = bool(terrain.get("curriculum")) and self._fixed_height is None and not evaluation
+        if self._curriculum and self._height_range is None:
+            raise ConfigError("env.terrain.curriculum=true needs env.terrain.step_height_range=[min, max]")
+        distance = terrain.get("step_distance")
+        self._distance_range = None if distance is None else (float(distance[0]), float(distance[1]))
+        # Without any of these the step stays exactly where the model file puts it.
+        self._moves_step = (self._fixed_height is not None or self._height_range is not None
+                            or self._distance_range is not None)
+        self.level = self._height_range[0] if self._height_range else self.step_height  # curriculum: the range's top now
+        self._level_step = float(terrain.get("curriculum_step") or 0.02)
+        self._threshold = float(terrain.get("curriculum_threshold") or 0.8)
+        self.outcomes = deque(maxlen=int(terrain.get("curriculum_window") or 20))
+        depth = 2 * self._half[2]
+        top = max([self._fixed_height or 0.0, *(self._height_range or ())])
+        if top > depth:
+            raise ConfigError(f"env.terrain: a step of {top} m is taller than the model's step box is deep ({depth} m)")
+
+    def _read_step(self) -> tuple:
+        pos = self.model.body_pos[self._step_id] + self._box_offset
+        return float(pos[2] + self._half[2]), float(pos[0] - self._half[0])
+
+    def _place_step(self, height: float, distance: float) -> None:
+        edge = self._start_x + distance
+        self.model.body_pos[self._step_id] = [edge + self._half[0] - self._box_offset[0], self._step_pos0[1],
+                                              height - self._half[2] - self._box_offset[2]]
+        self.step_height, self.step_edge = height, edge
+
+    # -- episodes ------------------------------------------------------------------------------------
+    def _reset_episode_memory(self) -> None:
+        self._prev_action = np.zeros(self.model.nu)
+        self._air_time = np.zeros(len(self.feet))
+        self._prev_contact = np.zeros(len(self.feet), bool)
+        self._prev_feet_xy = None
+        self._stepped = False
+        self.gait.reset()
+
+    def reset(self, *, seed=None, options=None):
+        if self.has_step and self._stepped and self._curriculum:  # judge the episode before the reset wipes it
+            self._record_outcome(self.crossed())
+        self._stepped = False
+        return super().reset(seed=seed, options=options)
+
+    def reset_model(self):
+        if self.has_step and self._moves_step:
+            self._draw_step()
+        self._reset_episode_memory()
+        observation = super().reset_model()
+        self._prev_feet_xy = self.data.geom_xpos[self.feet, :2].copy()
+        return observation
+
+    def _draw_step(self) -> None:
+        rng = self.np_random
+        if self._fixed_height is not None:
+            height = self._fixed_height
+        elif self._height_range is not None:
+            low, high = self._height_range
+            height = float(rng.uniform(low, self.level if self._curriculum else high))
+        else:
+            height = self.model_step[0]
+        distance = float(rng.uniform(*self._distance_range)) if self._distance_range else self.model_step[1]
+        self._place_step(height, distance)
+
+    def _record_outcome(self, success: bool) -> None:
+        """The curriculum: widen [min, level] by curriculum_step once the recent success rate passes the threshold."""
+        self.outcomes.append(bool(success))
+        if len(self.outcomes) == self.outcomes.maxlen and np.mean(self.outcomes) >= self._threshold:
+            self.level = min(self.level + self._level_step, self._height_range[1])
+            self.outcomes.clear()
+
+    def crossed(self) -> bool:
+        """Success on a step env: the main body is success_margin beyond the step's edge."""
+        return bool(self.data.xpos[self._body_id][0] >= self.step_edge + self.success_margin)
+
+    def terrain_height(self, x: np.ndarray) -> np.ndarray:
+        """Ground height at world x (the step's top beyond its edge, else the floor at 0)."""
+        if not self.has_step:
+            return np.zeros_like(x)
+        return np.where(x >= self.step_edge, self.step_height, 0.0)
+
+    # -- stepping ------------------------------------------------------------------------------------
+    def _step_mujoco_simulation(self, ctrl, n_frames):
+        if not self.measure_gait:
+            return super()._step_mujoco_simulation(ctrl, n_frames)
+        model, data = self.model, self.data
+        data.ctrl[:] = ctrl
+        for _ in range(n_frames):  # eval: the gait sampled at every physics step
+            mujoco.mj_step(model, data)
+            feet, body = self._contacts()
+            speed = float(np.abs(data.qvel[self._act_dofs]).max()) if len(self._act_dofs) else 0.0
+            self.gait.add(feet, speed, body > 0, model.opt.timestep)
+        mujoco.mj_rnePostConstraint(model, data)
+
+    def _contacts(self) -> tuple:
+        """(a ground-contact flag per foot, the number of geoms of non-foot bodies touching the ground)."""
+        pairs = self.data.contact.geom
+        feet = np.zeros(len(self.feet), bool)
+        if len(pairs) == 0:
+            return feet, 0
+        kind = self._kind[pairs]
+        ground = kind == 1
+        partner = np.where(ground[:, 0], pairs[:, 1], pairs[:, 0])[ground.any(axis=1)]
+        partner_kind = self._kind[partner]
+        feet[self._foot_index[partner[partner_kind == 2]]] = True
+        return feet, len(np.unique(partner[partner_kind == 3]))
+
+    def step(self, action):
+        xy_before = self.data.body(self._main_body).xpos[:2].copy()
+        self.do_simulation(action, self.frame_skip)
+        xy_after = self.data.body(self._main_body).xpos[:2].copy()
+        xy_velocity = (xy_after - xy_before) / self.dt
+        x_velocity, y_velocity = xy_velocity
+        speed = x_velocity if self._heading_is_x else float(xy_velocity @ self.heading)
+        self._stepped = True
+
+        observation = self._get_obs()
+        reward, reward_info = self._get_rew(speed, action)
+        extra_reward, extra_info = self._legged_terms(action)
+        reward = reward + extra_reward if extra_info else reward
+        if self._positive_only:  # legged_gym's only_positive_rewards: costs never make an early fall pay
+            reward = max(reward, 0.0)
+        terminated = (not self.is_healthy) and self._terminate_when_unhealthy
+        info = {"x_position": self.data.qpos[0], "y_position": self.data.qpos[1],
+                "distance_from_origin": np.linalg.norm(self.data.qpos[0:2], ord=2),
+                "x_velocity": x_velocity, "y_velocity": y_velocity, "forward_velocity": speed,
+                **reward_info, **extra_info}
+        if self.render_mode == "human":
+            self.render()
+        return observation, reward, terminated, False, info
+
+    def _get_rew(self, speed: float, action):
+        if self._target_speed is not None:
+            speed = min(speed, self._target_speed)
+        return super()._get_rew(speed, action)
+
+    def _legged_terms(self, action) -> tuple:
+        """The legged-locomotion reward terms whose weight is not 0: (their sum, each term signed)."""
+        w, data, terms = self._w, self.data, {}
+        if w["torque_cost_weight"]:
+            terms["reward_torque"] = -w["torque_cost_weight"] * float(np.square(data.actuator_force).sum())
+        if w["joint_speed_cost_weight"]:
+            terms["reward_joint_speed"] = -w["joint_speed_cost_weight"] * float(np.square(data.qvel[self._act_dofs]).sum())
+        if w["action_rate_cost_weight"]:
+            terms["reward_action_rate"] = -w["action_rate_cost_weight"] * float(np.square(action - self._prev_action).sum())
+        self._prev_action = np.asarray(action, dtype=np.float64).copy()
+        body = data.xpos[self._body_id]
+        if w["base_height_cost_weight"]:
+            height = body[2] - float(self.terrain_height(np.array(body[0])))
+            terms["reward_base_height"] = -w["base_height_cost_weight"] * (height - self._height_target) ** 2
+        if w["orientation_cost_weight"]:
+            up = data.xmat[self._body_id].reshape(3, 3)[2] @ self._up0  # cos(tilt from the initial attitude)
+            terms["reward_orientation"] = -w["orientation_cost_weight"] * (1.0 - float(up))
+        if self._needs_contacts:
+            feet, body_contacts = self._contacts()
+            feet_xy = data.geom_xpos[self.feet, :2]
+            if w["foot_slip_cost_weight"]:
+                slip = np.square((feet_xy - self._prev_feet_xy) / self.dt).sum(axis=1)
+                terms["reward_foot_slip"] = -w["foot_slip_cost_weight"] * float(slip[feet].sum())
+            if w["feet_air_time_weight"]:
+                touchdown = feet & (self._air_time > 0)
+                terms["reward_air_time"] = w["feet_air_time_weight"] * float(
+                    ((self._air_time - self._air_target) * touchdown).sum())
+            if w["body_contact_cost_weight"]:
+                terms["reward_body_contact"] = -w["body_contact_cost_weight"] * body_contacts
+            self._air_time = np.where(feet, 0.0, self._air_time + self.dt)
+            self._prev_contact = feet
+            self._prev_feet_xy = feet_xy.copy()
+        return sum(terms.values()), terms
+
+    def _get_obs(self):
+        observation = super()._get_obs()
+        extras = []
+        if self.observe_contacts:
+            extras.append(self._contacts()[0].astype(np.float64))
+        if self.height_samples:
+            body = self.data.xpos[self._body_id]
+            ahead = body[0] + self._sample_spacing * np.arange(self.height_samples)
+            extras.append(self.terrain_height(ahead))
+        return np.concatenate([observation, *extras]) if extras else observation
+
+    # -- what a resumed run needs beyond the simulator state -----------------------------------------
+    def get_extra_state(self) -> dict:
+        state = {"prev_action": self._prev_action.copy(), "air_time": self._air_time.copy(),
+                 "prev_contact": self._prev_contact.copy(), "stepped": self._stepped,
+                 "prev_feet_xy": None if self._prev_feet_xy is None else self._prev_feet_xy.copy(),
+                 # mj_step leaves body positions from the start of its last physics step, and the next step's
+                 # velocity starts from them (Ant-v5's way); a restored state must start from the same ones.
+                 "xpos": self.data.xpos.copy()}
+        if self.has_step:
+            state.update(step_height=self.step_height, step_edge=self.step_edge, level=self.level,
+                         outcomes=list(self.outcomes))
+        return state
+
+    def set_extra_state(self, state: dict) -> None:
+        """After the simulator state is set (envs.set_env_state): the step, the curriculum, the episode's memory."""
+        self._prev_action, self._air_time = state["prev_action"].copy(), state["air_time"].copy()
+        self._prev_contact, self._stepped = state["prev_contact"].copy(), state["stepped"]
+        self._prev_feet_xy = None if state["prev_feet_xy"] is None else state["prev_feet_xy"].copy()
+        if self.has_step and "step_height" in state:
+            self._place_step(state["step_height"], state["step_edge"] - self._start_x)
+            self.level = state["level"]
+            self.outcomes.clear()
+            self.outcomes.extend(state["outcomes"])
+            mujoco.mj_forward(self.model, self.data)  # contacts with the step where it now is
+        if "xpos" in state:
+            self.data.xpos[:] = state["xpos"]
+
+    def gait_summary(self) -> dict:
+        return self.gait.summary()

@@ -1,0 +1,257 @@
+"""Issue 18: the locomotion env (locomotion.py): actuation limits, reward terms, terrain and its
+curriculum, observation extras, heading, tracking camera, and evaluation across step heights."""
+
+import csv
+import json
+from pathlib import Path
+
+import gymnasium
+import mujoco
+import numpy as np
+import pytest
+
+from ppo_torchrl import evaluate
+from ppo_torchrl.envs import get_env_state, gym_make_kwargs, make_gym_env, set_env_state
+from ppo_torchrl.trainer import Trainer
+
+from conftest import TINY, compose_config
+from test_bad_input import refused
+
+GYM_ANT_XML = Path(gymnasium.__file__).parent / "envs" / "mujoco" / "assets" / "ant.xml"
+WEIGHTS = ["torque_cost_weight", "joint_speed_cost_weight", "action_rate_cost_weight", "foot_slip_cost_weight",
+           "base_height_cost_weight", "orientation_cost_weight", "body_contact_cost_weight", "feet_air_time_weight"]
+# A base built facing -x (rotated half a turn about z), one leg with a motor.
+FACING_MINUS_X = """<mujoco><worldbody><geom name="floor" type="plane" size="20 20 0.1"/>
+<body name="base" pos="0 0 0.3" quat="0 0 0 1"><freejoint/><geom type="box" size="0.2 0.1 0.05"/>
+<body name="leg"><joint name="hip" type="hinge" axis="0 1 0"/><geom type="capsule" fromto="0 0 0 0 0 -0.2" size="0.02"/>
+</body></body></worldbody><actuator><motor joint="hip" ctrlrange="-1 1"/></actuator></mujoco>"""
+
+
+def env_of(*overrides, **kwargs):
+    return make_gym_env(compose_config(list(overrides)).env, **kwargs)
+
+
+def rollout(env, steps, seed=0):
+    env.reset(seed=seed)
+    rng = np.random.default_rng(seed)
+    infos = []
+    for _ in range(steps):
+        _, reward, terminated, _, info = env.step(rng.uniform(-1, 1, env.action_space.shape).astype(np.float32))
+        infos.append((reward, info))
+        if terminated:
+            break
+    return infos
+
+
+def test_without_the_new_keys_an_mjcf_robot_steps_exactly_as_ant_v5():
+    cfg = compose_config(["env=mjcf", f"env.xml_file={GYM_ANT_XML}"])
+    kwargs = {k: v for k, v in gym_make_kwargs(cfg.env).items() if k not in ("legged", "terrain", "evaluation")}
+    ant = gymnasium.make("Ant-v5", disable_env_checker=True, **kwargs)
+    ours = make_gym_env(cfg.env)
+    assert np.array_equal(ours.reset(seed=3)[0], ant.reset(seed=3)[0])
+    for action in np.random.default_rng(0).uniform(-1, 1, (60, 8)).astype(np.float32):
+        a, b = ours.step(action), ant.step(action)
+        assert np.array_equal(a[0], b[0]) and a[1] == b[1] and a[2] == b[2]
+
+
+def test_reward_terms_follow_their_weights():
+    base = ["env=quadruped", "env.locomotion.only_positive_rewards=false", "env.locomotion.target_speed=null"]
+    off = rollout(env_of(*base, *(f"env.locomotion.{w}=0" for w in WEIGHTS)), 40)
+    one = rollout(env_of(*base, *(f"env.locomotion.{w}=1" for w in WEIGHTS)), 40)
+    two = rollout(env_of(*base, *(f"env.locomotion.{w}=2" for w in WEIGHTS)), 40)
+    seen = set()
+    for (r0, i0), (r1, i1), (r2, i2) in zip(off, one, two):
+        terms = {k: v for k, v in i1.items() if k.startswith("reward_") and k not in i0}
+        seen |= {k for k, v in terms.items() if v != 0}
+        assert r1 == pytest.approx(r0 + sum(terms.values()))  # each weighted term is in the reward
+        for key, value in terms.items():
+            assert i2[key] == pytest.approx(2 * value)  # and scales with its weight
+    assert {"reward_torque", "reward_joint_speed", "reward_action_rate", "reward_base_height", "reward_orientation",
+            "reward_foot_slip", "reward_air_time"} <= seen
+
+
+def test_target_speed_caps_the_forward_reward_and_only_positive_rewards_floors_it():
+    env = env_of("env=quadruped", "env.locomotion.target_speed=0.01")
+    for reward, info in rollout(env, 30):
+        assert reward >= 0.0  # only_positive_rewards (on in env=quadruped)
+        assert info["reward_forward"] <= 2.0 * 0.01 + 1e-12
+
+
+def test_joint_speed_and_torque_limits_hold_in_a_random_rollout():
+    def peak(*overrides):
+        env = env_of("env=quadruped", *overrides)
+        env.unwrapped.measure_gait = True
+        top = 0.0
+        for seed in (0, 1):
+            env.reset(seed=seed)
+            for reward, info in rollout(env, 100, seed):
+                assert np.abs(env.unwrapped.data.actuator_force).max() <= 40.0 + 1e-9
+            top = max(top, env.unwrapped.gait_summary()["peak_joint_speed"])
+        return top
+
+    assert peak() <= 8.0  # env=quadruped: 40 N m, 8 rad/s
+    assert peak("env.locomotion.joint_speed_limit=null") > 8.0  # the same rollouts without the limit
+
+
+def test_step_height_is_drawn_in_range_and_the_curriculum_widens_on_success():
+    env = env_of("env=quadruped_step", "env.terrain.step_height_range=[0.0,0.2]", "env.terrain.curriculum_window=2",
+                 "env.terrain.curriculum_threshold=0.5", "env.terrain.curriculum_step=0.05")
+    loco = env.unwrapped
+    env.reset(seed=0)
+    assert loco.level == 0.0 and loco.step_height == 0.0 and 1.5 <= loco.step_edge <= 2.5
+    for episode in range(4):  # four successes in windows of two: the level rises twice
+        env.step(np.zeros(12, np.float32))
+        loco.data.qpos[0] = loco.step_edge + 1.0
+        mujoco.mj_kinematics(loco.model, loco.data)
+        env.reset()
+        assert 0.0 <= loco.step_height <= loco.level and 1.5 <= loco.step_edge <= 2.5
+    assert loco.level == pytest.approx(0.1)
+    top = loco.data.geom_xpos[loco.model.geom("step").id][2] + loco.model.geom_size[loco.model.geom("step").id][2]
+    assert top == pytest.approx(loco.step_height)  # the model's step is where the env says
+    env.step(np.zeros(12, np.float32))
+    env.reset()  # a failure (the trunk is back at the start) does not widen it
+    assert loco.level == pytest.approx(0.1)
+
+    heights = set()
+    for seed in range(20):  # no curriculum: the whole range
+        plain = env_of("env=quadruped_step", "env.terrain.curriculum=false").unwrapped
+        plain.reset(seed=seed)
+        heights.add(round(plain.step_height, 3))
+        assert 0.0 <= plain.step_height <= 0.2
+    assert max(heights) > 0.1
+
+
+def test_the_curriculum_and_the_step_travel_with_the_env_state():
+    env = env_of("env=quadruped_step", "env.terrain.curriculum_window=1", "env.terrain.curriculum_threshold=1")
+    env.reset(seed=0)
+    env.step(np.zeros(12, np.float32))
+    env.unwrapped.data.qpos[0] = 9.0
+    mujoco.mj_kinematics(env.unwrapped.model, env.unwrapped.data)
+    env.reset()
+    env.step(np.ones(12, np.float32) * 0.3)
+    saved = get_env_state(env)
+    fresh = env_of("env=quadruped_step", "env.terrain.curriculum_window=1", "env.terrain.curriculum_threshold=1")
+    fresh.reset(seed=5)
+    set_env_state(fresh, saved)
+    a, b = env.unwrapped, fresh.unwrapped
+    assert b.level == a.level == pytest.approx(0.02)
+    assert (b.step_height, b.step_edge) == (a.step_height, a.step_edge)
+    np.testing.assert_array_equal(b.model.body_pos, a.model.body_pos)
+    action = np.full(12, -0.2, np.float32)
+    first, second = env.step(action), fresh.step(action)
+    assert np.array_equal(first[0], second[0]) and first[1] == second[1]
+
+
+def test_eval_envs_use_the_eval_height_and_a_fixed_height_wins():
+    evaluation = env_of("env=quadruped_step", evaluation=True).unwrapped
+    evaluation.reset(seed=0)
+    assert evaluation.step_height == 0.15
+    fixed = env_of("env=quadruped_step", "env.terrain.step_height=0.07", evaluation=True).unwrapped
+    fixed.reset(seed=0)
+    assert fixed.step_height == 0.07
+    old = env_of("env=quadruped_step", "env.terrain.step_height_range=null", "env.terrain.curriculum=false",
+                 "env.terrain.step_distance=null", "env.terrain.eval_step_height=null").unwrapped
+    old.reset(seed=0)
+    assert old.step_height == pytest.approx(0.15) and old.step_edge == pytest.approx(2.0)  # the model's own step
+
+
+def test_contacts_and_height_samples_extend_the_observation():
+    blind = env_of("env=quadruped_step").observation_space.shape[0]
+    seeing = env_of("env=quadruped_step", "env.terrain.observe_contacts=true", "env.terrain.height_samples=30",
+                    "env.terrain.step_height=0.12", "env.terrain.step_distance=[1.0,1.0]")
+    assert seeing.observation_space.shape[0] == blind + 4 + 30
+    obs, _ = seeing.reset(seed=0)
+    samples = obs[-30:]  # 0 to 2.9 m ahead of the trunk; the edge is 1 m ahead
+    assert set(np.round(samples, 3)) == {0.0, 0.12} and samples[0] == 0.0 and samples[-1] == pytest.approx(0.12)
+    for _ in range(25):
+        obs, *_ = seeing.step(np.zeros(12, np.float32))
+    assert obs[-34:-30].tolist() == [1.0] * 4  # standing: four feet down
+    assert seeing.unwrapped._contacts()[1] == 0  # and no non-foot body (the shanks carry the feet)
+
+
+def test_heading_auto_makes_a_minus_x_model_move_forward(tmp_path):
+    path = tmp_path / "backwards.xml"
+    path.write_text(FACING_MINUS_X)
+
+    def forward_velocity(heading):
+        env = env_of("env=mjcf", f"env.xml_file={path}", "env.locomotion.main_body=base",
+                     f"env.locomotion.heading={heading}", "env.locomotion.healthy_z_range=[0.0,5.0]")
+        env.reset(seed=0)
+        env.unwrapped.data.qvel[0] = -1.0  # along the base's own +x: world -x
+        return env.step(np.zeros(1, np.float32))[4]["forward_velocity"]
+
+    assert forward_velocity("auto") > 0.5
+    assert forward_velocity("-x") > 0.5 and forward_velocity("180") > 0.5
+    assert forward_velocity("x") < -0.5  # Gymnasium's world +x: the robot would learn to walk backwards
+
+
+def test_a_model_without_a_track_camera_gets_one_when_rendered(tmp_path):
+    path = tmp_path / "no_camera.xml"
+    path.write_text(FACING_MINUS_X)
+    assert mujoco.MjModel.from_xml_path(str(path)).ncam == 0
+    env = env_of("env=mjcf", f"env.xml_file={path}", "env.locomotion.main_body=base", "env.locomotion.heading=auto",
+                 render_mode="rgb_array", width=64, height=48)
+    model = env.unwrapped.model
+    camera = model.camera("track")
+    assert model.cam_mode[camera.id] == mujoco.mjtCamLight.mjCAMLIGHT_TRACKCOM
+    assert model.cam_bodyid[camera.id] == model.body("base").id
+    assert env.unwrapped.mujoco_renderer.camera_id == camera.id
+    env.reset(seed=0)
+    data = env.unwrapped.data
+    image_right = data.cam_xmat[camera.id].reshape(3, 3)[:, 0]  # the camera's x axis: right in the image
+    assert image_right[:2] @ env.unwrapped.heading > 0.99  # the robot walks to the right of the frame
+    assert make_gym_env(compose_config(["env=mjcf", f"env.xml_file={path}", "env.locomotion.main_body=base"]).env
+                        ).unwrapped.model.ncam == 0  # not rendered: the model as written
+
+
+@pytest.mark.parametrize("args, expected", [
+    (["env.terrain.step_height=-0.05"], "env.terrain.step_height=-0.05 must be >= 0"),
+    (["env.terrain.step_height_range=[0.2,0.1]"], "must be [min, max] with 0 <= min <= max"),
+    (["env.terrain.step_height_range=[-0.1,0.1]"], "must be [min, max] with 0 <= min <= max"),
+    (["env.terrain.step_distance=[3,2]"], "env.terrain.step_distance=[3.0, 2.0] must be [min, max]"),
+    (["env.terrain.curriculum_threshold=1.5"], "curriculum_threshold=1.5 must be in (0, 1]"),
+    (["env.terrain.height_samples=-1"], "height_samples=-1 must be >= 0"),
+    (["env.terrain.step_height=2"], "taller than the model's step box is deep"),
+    (["env.locomotion.heading=north"], "env.locomotion.heading=north is not known"),
+    (["env.locomotion.joint_speed_limit=0"], "joint_speed_limit=0.0 must be > 0"),
+    (["env.locomotion.torque_cost_weight=-1"], "torque_cost_weight=-1.0 must be >= 0"),
+])
+def test_bad_terrain_and_locomotion_values_are_one_error_line(args, expected, capsys, tmp_path):
+    code, lines = refused(["env=quadruped_step", *args, f"hydra.run.dir={tmp_path / 'new'}"], capsys)
+    assert code == 2 and len(lines) == 1 and lines[0].startswith("error: ") and expected in lines[0], lines
+    assert not (tmp_path / "new").exists()
+
+
+@pytest.mark.parametrize("args, expected", [
+    (["env=quadruped", "env.terrain.step_height=0.1"], "needs a model with a body named 'step'"),
+    (["env=InvertedPendulum-v4", "env.terrain.step_height=0.1"], "works on MJCF robots"),
+])
+def test_terrain_needs_a_step_model(args, expected, capsys, tmp_path):
+    code, lines = refused([*args, f"hydra.run.dir={tmp_path / 'new'}"], capsys)
+    assert code == 2 and len(lines) == 1 and expected in lines[0], lines
+
+
+@pytest.fixture(scope="module")
+def step_run(tmp_path_factory):
+    run = tmp_path_factory.mktemp("step_run")
+    cfg = compose_config(["env=quadruped_step", *TINY, "env.max_episode_steps=40", "policy.hidden_sizes=[16,16]",
+                          "policy.critic_hidden_sizes=[16,16]"])
+    Trainer(cfg, run).train()
+    return run
+
+
+def test_evaluate_at_a_step_height_reports_gait_figures(step_run):
+    result = evaluate.main([f"run={step_run}", "episodes=2", "env.terrain.step_height=0.05"])
+    saved = json.loads((step_run / "eval" / "eval.json").read_text())
+    assert saved["step_height_mean"] == pytest.approx(0.05) and saved["overrides"] == ["env.terrain.step_height=0.05"]
+    for key in ("success_rate", "stride_frequency", "duty_factor", "peak_joint_speed", "body_contact_share"):
+        assert key in result and key in saved
+    assert 0.0 <= result["duty_factor"] <= 1.0 and result["peak_joint_speed"] <= result["joint_speed_limit"]
+
+
+def test_height_sweep_writes_a_csv_and_a_success_curve(step_run, tmp_path):
+    evaluate.main([f"run={step_run}", "episodes=1", "heights=0,0.1,0.2", f"out={tmp_path}"])
+    rows = list(csv.DictReader(open(tmp_path / "height_sweep.csv")))
+    assert [float(r["step_height_m"]) for r in rows] == [0.0, 0.1, 0.2]
+    assert all(0.0 <= float(r["success_rate"]) <= 1.0 for r in rows)
+    assert (tmp_path / "height_sweep.png").read_bytes()[:4] == b"\x89PNG"
