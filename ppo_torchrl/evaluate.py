@@ -142,6 +142,10 @@ def evaluate_policy(cfg, ac: ActorCritic, obs_stats: Optional[dict], episodes: i
     return result
 
 
+# What an eval of a locomotion env adds: gait_figures' keys (also in summary.json and the height sweep)
+GAIT_KEYS = ("stride_frequency", "duty_factor", "peak_joint_speed", "body_contact_share")
+
+
 def gait_figures(gaits: list, speed_limit: Optional[float]) -> dict:
     """Per-episode gait figures (locomotion.GaitMeter) over the eval: means, and the peak joint speed's max."""
     figures = {key: float(np.mean([g[key] for g in gaits]))
@@ -220,7 +224,7 @@ def height_sweep(cfg, ac, obs_stats, heights: list[float], episodes: int, seed: 
                               "on the step add env.xml_file=quadruped_step.xml")
         row = {"step_height_m": height, "episodes": episodes, "success_rate": result["success_rate"],
                "forward_velocity_mean": result["forward_velocity_mean"], "return_mean": result["return_mean"],
-               **{k: result.get(k) for k in ("stride_frequency", "duty_factor", "peak_joint_speed", "body_contact_share")}}
+               **{k: result.get(k) for k in GAIT_KEYS}}
         rows.append(row)
         print(f"step {height * 100:g} cm: {row['success_rate']:.0%} of {episodes} episodes cross; forward velocity "
               f"{row['forward_velocity_mean']:.2f} m/s", flush=True)

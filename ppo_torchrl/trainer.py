@@ -27,7 +27,7 @@ from ppo_torchrl.collectors import make_collector
 from ppo_torchrl.envs import env_label, seed_everything
 from ppo_torchrl.errors import ConfigError, Interrupted, TrainingError
 from ppo_torchrl.eval_worker import BackgroundEval, use_background_eval
-from ppo_torchrl.evaluate import evaluate_policy
+from ppo_torchrl.evaluate import GAIT_KEYS, evaluate_policy
 from ppo_torchrl.loggers import COLUMNS, MetricsFile, Progress, close_logger, make_logger, truncate_logs
 from ppo_torchrl.losses import LOSS_INPUT_KEYS, LOSS_METRICS, NOT_COMPILABLE, make_loss, make_optimizer
 from ppo_torchrl.minibatch import make_minibatch_step
@@ -386,7 +386,7 @@ class Trainer:
             "eval_return_mean": last_eval.get("return_mean"),
             "eval_return_std": last_eval.get("return_std"),
             "eval_frames": last_eval.get("frames"),
-            **{k: last_eval[k] for k in ("forward_velocity_mean", "success_rate") if k in last_eval},
+            **{k: last_eval[k] for k in ("forward_velocity_mean", "success_rate", *GAIT_KEYS) if k in last_eval},
             "train_return_last100": float(np.mean(self.recent_returns)) if self.recent_returns else None,
             "best_eval_return": self.ckpt.best_return,
             "run_dir": str(self.run_dir),
