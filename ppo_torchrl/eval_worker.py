@@ -38,7 +38,9 @@ class BackgroundEval:
     def __init__(self, cfg, write_row: Callable[[dict], None], on_result: Callable[[int, dict, object], dict]):
         from omegaconf import OmegaConf
 
-        context = mp.get_context("spawn")  # a fresh interpreter: no forked torch or simulator state
+        # fork where there is one (Linux, as torch's DataLoader workers): spawn would import the user's
+        # __main__ again, which a script without an `if __name__ == "__main__"` guard cannot take.
+        context = mp.get_context("fork" if "fork" in mp.get_all_start_methods() else "spawn")
         self._jobs, self._results = context.Queue(), context.Queue()
         self._process = context.Process(target=_serve, name="ppo_torchrl-eval", daemon=True,
                                         args=(OmegaConf.to_container(cfg, resolve=True), self._jobs,
@@ -97,6 +99,7 @@ class BackgroundEval:
 def _serve(cfg_dict: dict, jobs, results, parent_pid: int) -> None:
     """The worker: one actor, rebuilt from the run's config; each job loads weights and evaluates."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole process group: the trainer decides
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # not the trainer's handler, forked with it
     import torch
     from omegaconf import OmegaConf
 

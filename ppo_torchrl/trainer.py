@@ -211,6 +211,8 @@ class Trainer:
             if last or stop.signum is not None or self._crossed(cfg.checkpoint.every_frames):
                 path = self.save_checkpoint(eval_return=row.get("eval/return_mean"))
             if stop.signum is not None and not last:
+                if self.evals is not None:  # the evals under way (seconds): their rows as an uninterrupted run has them
+                    self.evals.poll(block=True)
                 self.write_summary(status="interrupted")
                 raise Interrupted(f"checkpoint at frame {self.frames} saved to {path} "
                                   f"(resume with: python -m ppo_torchrl resume={self.run_dir})", stop.signum)
