@@ -35,20 +35,26 @@ def copy_finished_runs(sweep: Path, dest: Path, name_of) -> dict:
     return rows
 
 
+def sample_std(x: np.ndarray) -> float:
+    """The +- of every results table: the sample std over seeds (ddof=1)."""
+    return float(x.std(ddof=1)) if len(x) > 1 else 0.0
+
+
 def main(sweep: Path, dest: Path) -> None:
     report.main([str(sweep)])
     rows = copy_finished_runs(sweep, dest, lambda summary, config: summary["env"])
     for name in ("sweep_report.png", "sweep_report.md", "sweep_report.csv"):
         shutil.copy(sweep / name, dest / name)
-    lines = ["| env | seeds | frames | train return, last 100 (mean +- std) | per seed | deterministic eval (mean +- std) | SPS per run |",
-             "|---|---|---|---|---|---|---|"]
+    lines = ["| env | seeds | frames | train return, last 100 (mean +- sample std) | per seed | deterministic eval (mean +- sample std) | SPS per run | wall s per run |",
+             "|---|---|---|---|---|---|---|---|"]
     for env, runs in sorted(rows.items()):
         runs.sort(key=lambda s: s["seed"])
         train = np.array([s["train_return_last100"] for s in runs])
         evals = np.array([s["eval_return_mean"] for s in runs])
         lines.append(f"| {env} | {','.join(str(s['seed']) for s in runs)} | {runs[0]['frames']:,} | "
-                     f"{train.mean():.0f} +- {train.std():.0f} | {', '.join(f'{x:.0f}' for x in train)} | "
-                     f"{evals.mean():.0f} +- {evals.std():.0f} | {np.mean([s['sps'] for s in runs]):.0f} |")
+                     f"{train.mean():.0f} +- {sample_std(train):.0f} | {', '.join(f'{x:.0f}' for x in train)} | "
+                     f"{evals.mean():.0f} +- {sample_std(evals):.0f} | {np.mean([s['sps'] for s in runs]):.0f} | "
+                     f"{np.mean([s['wall_s'] for s in runs]):.0f} |")
     (dest / "table.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 

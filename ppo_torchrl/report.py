@@ -167,8 +167,9 @@ def plot_sweep(sweep_dir: Path) -> List[Path]:
         rows.append({
             "group": key, "seeds": " ".join(str(s["seed"]) for _, s in sorted(runs, key=lambda r: r[1]["seed"])),
             "n": n, "frames": int(np.min([s["frames"] for _, s in runs])),
-            "train_return_mean": final.mean(), "train_return_std": final.std(),
-            "eval_return_mean": np.nanmean(evals), "eval_return_std": np.nanstd(evals),
+            # +- is the sample std over seeds (ddof=1), 0 for a single run
+            "train_return_mean": final.mean(), "train_return_std": final.std(ddof=1) if n > 1 else 0.0,
+            "eval_return_mean": np.nanmean(evals), "eval_return_std": np.nanstd(evals, ddof=1) if n > 1 else 0.0,
             "sps": float(np.mean([s["sps"] for _, s in runs])),
         })
     ax.set(xlabel="frames", ylabel="train return (last 100 episodes, raw)", title=f"{Path(sweep_dir).name}: mean and 95% CI over seeds")
@@ -183,7 +184,8 @@ def plot_sweep(sweep_dir: Path) -> List[Path]:
         writer = csv.DictWriter(f, fieldnames=list(rows[0]))
         writer.writeheader()
         writer.writerows(rows)
-    md = ["| group | seeds | frames | train return (last 100) | eval return | SPS |", "|---|---|---|---|---|---|"]
+    md = ["| group | seeds | frames | train return (last 100), mean +- sample std | eval return | SPS |",
+          "|---|---|---|---|---|---|"]
     md += [f"| {r['group']} | {r['seeds']} | {r['frames']:,} | {r['train_return_mean']:.1f} +- {r['train_return_std']:.1f} "
            f"| {r['eval_return_mean']:.1f} +- {r['eval_return_std']:.1f} | {r['sps']:.0f} |" for r in rows]
     md_path = Path(sweep_dir) / "sweep_report.md"

@@ -33,6 +33,12 @@ def test_joblib_multirun_runs_every_seed_in_parallel_and_the_report_summarizes_t
     table = md.read_text()
     assert "| 1 2 3 | 512 |" in table and "skipped 9_partial: status interrupted" in table
     assert csv.read_text().splitlines()[1].split(",")[1] == "1 2 3"
+    import numpy as np
+
+    finals = [json.loads((run / "summary.json").read_text())["train_return_last100"]
+              for run in sorted(tmp_path.glob("[0-9]_*")) if run.name != "9_partial"]
+    row = next(r for r in csv.read_text().splitlines()[1:] if r.split(",")[1] == "1 2 3").split(",")
+    assert float(row[5]) == pytest.approx(np.std(finals, ddof=1))  # +- is the sample std over seeds
 
 
 def test_optuna_search_runs_trials_and_prints_the_best(tmp_path, capsys):
