@@ -121,7 +121,7 @@ class EnvConfig:
     max_episode_steps: Optional[int] = None  # None: the id's registered time limit
     make_kwargs: Dict[str, Any] = field(default_factory=dict)  # extra gymnasium.make kwargs
     # env=mjcf: the robot's MJCF file, run as a locomotion env (Gymnasium's Ant-v5 class). A path, or
-    # the name of a model shipped in ppo_torchrl/assets (quadruped.xml, quadruped_step.xml).
+    # the name of a model shipped in ppo_torchrl/assets (quadruped.xml, quadruped_step.xml, quadruped_a1like.xml).
     xml_file: Optional[str] = None
     locomotion: LocomotionConfig = field(default_factory=LocomotionConfig)
     terrain: TerrainConfig = field(default_factory=TerrainConfig)

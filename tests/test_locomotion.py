@@ -204,6 +204,28 @@ def test_a_model_without_a_track_camera_gets_one_when_rendered(tmp_path):
                         ).unwrapped.model.ncam == 0  # not rendered: the model as written
 
 
+def test_the_a1like_quadruped_faces_minus_x_stands_and_gets_a_tracking_camera():
+    """env=quadruped_a1like: a second quadruped (its own names, built facing -x, no camera) under the recipe."""
+    env = env_of("env=quadruped_a1like")
+    loco = env.unwrapped
+    model = loco.model
+    assert 12.0 < model.body_subtreemass[model.body("trunk").id] < 13.0 and model.nu == 12 and model.ncam == 0
+    assert np.allclose(loco.heading, [-1.0, 0.0])  # heading=auto: the trunk's nose, world -x
+    assert [model.geom(int(g)).name for g in loco.feet] == ["FL_foot", "FR_foot", "RL_foot", "RR_foot"]
+    assert np.allclose(np.abs(model.actuator_forcerange), 33.5)  # the A1's drives
+    env.reset(seed=0)
+    for _ in range(100):  # 2 s under zero action: it stands, on its four feet and nothing else
+        _, _, terminated, _, info = env.step(np.zeros(12, np.float32))
+        assert not terminated
+    assert loco.data.qpos[2] > 0.22 and loco._contacts()[0].all() and loco._contacts()[1] == 0
+    loco.data.qvel[0] = -0.5  # pushed along its nose
+    assert env.step(np.zeros(12, np.float32))[4]["forward_velocity"] > 0.2
+    rendered = env_of("env=quadruped_a1like", render_mode="rgb_array", width=64, height=48).unwrapped
+    camera = rendered.model.camera("track")
+    assert rendered.model.cam_bodyid[camera.id] == rendered.model.body("trunk").id
+    assert rendered.mujoco_renderer.camera_id == camera.id
+
+
 @pytest.mark.parametrize("args, expected", [
     (["env.terrain.step_height=-0.05"], "env.terrain.step_height=-0.05 must be >= 0"),
     (["env.terrain.step_height_range=[0.2,0.1]"], "must be [min, max] with 0 <= min <= max"),
