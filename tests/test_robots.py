@@ -123,3 +123,19 @@ def test_eval_env_keeps_the_models_frame_skip_and_time_limit(tiny_cfg):
     assert env.base_env._env.unwrapped.frame_skip == 4
     rollout = env.rollout(1000, break_when_any_done=True)
     assert rollout.shape[-1] == 30
+
+
+@pytest.mark.parametrize("model", ["quadruped.xml", "quadruped_a1like.xml"])
+def test_shipped_quadrupeds_joint_ranges_cover_their_actuators_targets(model):
+    """A position actuator's targets must be reachable: each joint's range holds its ctrlrange (in
+    radians). quadruped.xml once wrote radians under angle="degree" and its legs barely bent."""
+    import mujoco
+
+    from ppo_torchrl.envs import resolve_model_file
+
+    m = mujoco.MjModel.from_xml_path(str(resolve_model_file(model)))
+    for a in range(m.nu):
+        joint = m.actuator_trnid[a, 0]
+        low, high = m.jnt_range[joint]
+        c_low, c_high = m.actuator_ctrlrange[a]
+        assert low <= c_low and c_high <= high, (mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, joint), m.jnt_range[joint])
