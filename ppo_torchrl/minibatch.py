@@ -66,7 +66,7 @@ class FusedStep:
         group = optimizer.param_groups[0]
         if group["amsgrad"] or group["maximize"]:
             raise ValueError("FusedStep does not implement amsgrad or maximize")
-        self.loss_module, self.optimizer = loss_module, optimizer
+        self.optimizer = optimizer
         self.loss_step = make_loss_step(loss_module, normalize_advantage)
         by_id = {id(p): name for name, p in loss_module.named_parameters()}
         self.names = [by_id[id(p)] for p in params]
@@ -76,7 +76,8 @@ class FusedStep:
         self.decoupled = isinstance(optimizer, torch.optim.AdamW)
         self.lr = torch.zeros((), device=params[0].device)  # a tensor: a new lr is no recompile
         self.metric_keys: Optional[List[str]] = None
-        self._grad_and_loss = grad_and_value(self._loss, has_aux=True)
+        # gradients with respect to the weights (loss_step's 2nd argument); the module's output rides as aux
+        self._grad_and_loss = grad_and_value(self.loss_step, argnums=1, has_aux=True)
         self._step = torch.compile(self._fused) if compile else self._fused
 
     def _state(self) -> List[Tuple[torch.Tensor, torch.Tensor, torch.Tensor]]:
@@ -89,12 +90,9 @@ class FusedStep:
                             "exp_avg_sq": torch.zeros_like(p, memory_format=torch.preserve_format)}
         return [(state[p]["step"], state[p]["exp_avg"], state[p]["exp_avg_sq"]) for p in self.params]
 
-    def _loss(self, weights: dict, minibatch: TensorDictBase):
-        return self.loss_step(minibatch, weights)  # (loss, the module's output as aux)
-
     def _fused(self, minibatch: TensorDictBase, lr: torch.Tensor, state: list) -> StepResult:
         weights = {name: p.detach() for name, p in zip(self.names, self.params)}
-        grads, (loss, out) = self._grad_and_loss(weights, minibatch)
+        grads, (loss, out) = self._grad_and_loss(minibatch, weights)
         metrics = torch.stack([loss, *(out.get(k).detach().float().mean() for k in self.metric_keys)])
         grads = [grads[name] for name in self.names]
         # clip_grad_norm_: the 2-norm of all gradients together, scaled down to max_norm
