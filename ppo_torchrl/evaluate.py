@@ -30,7 +30,7 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type
 from ppo_torchrl.envs import env_label, episode_seeds, make_torchrl_env
 from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.locomotion import LocomotionEnv
-from ppo_torchrl.models import ActorCritic
+from ppo_torchrl.models import ActorCritic, deterministic_policy
 
 VIDEO_FPS = 30
 VIDEO_SIZE = (480, 360)
@@ -75,7 +75,11 @@ def evaluate_policy(cfg, ac: ActorCritic, obs_stats: Optional[dict], episodes: i
     env = make_torchrl_env(cfg.env, clip_actions=ac.head == "normal", gamma=cfg.advantage.gamma,
                            obs_stats=obs_stats, train=False, **render)
     # The simulator runs on CPU; a CPU copy of the (small) actor avoids device hops per step.
-    actor = ac.actor if ac.action_low.device.type == "cpu" else copy.deepcopy(ac.actor).cpu()
+    if ac.action_low.device.type != "cpu":
+        ac = copy.deepcopy(ac)
+        ac.actor.cpu()
+        ac.action_low, ac.action_high = ac.action_low.cpu(), ac.action_high.cpu()
+    actor = deterministic_policy(ac) if deterministic else ac.actor
     mode = ExplorationType.DETERMINISTIC if deterministic else ExplorationType.RANDOM
     returns, lengths, frames, distances, gaits, crossed, heights = [], [], [], [], [], [], []
     gym_env = env.base_env._env

@@ -215,3 +215,19 @@ def deterministic_action(ac: ActorCritic, loc: torch.Tensor) -> torch.Tensor:
     if ac.head == "tanh_normal":
         return (ac.action_high + ac.action_low) / 2 + (ac.action_high - ac.action_low) / 2 * safetanh_noeps(loc)
     return torch.maximum(torch.minimum(loc, ac.action_high), ac.action_low)
+
+
+class _DeterministicHead(nn.Module):
+    def __init__(self, ac: ActorCritic):
+        super().__init__()
+        self.policy_net, self.ac = ac.policy_net, ac
+
+    def forward(self, observation: torch.Tensor) -> torch.Tensor:
+        return deterministic_action(self.ac, self.policy_net(observation)[0])
+
+
+def deterministic_policy(ac: ActorCritic) -> TensorDictModule:
+    """The actor in DETERMINISTIC mode as a plain TensorDictModule: "observation" -> "action", the same
+    values as `ac.actor` under `set_exploration_type(DETERMINISTIC)` (tests/test_models.py), without
+    building a distribution and its log-prob each step (~27% of an eval step on Hopper)."""
+    return TensorDictModule(_DeterministicHead(ac), in_keys=["observation"], out_keys=["action"])

@@ -5,7 +5,9 @@ from tensordict import TensorDict
 from torchrl.modules import TanhNormal
 
 from ppo_torchrl.envs import EnvSpec
-from ppo_torchrl.models import NumpyPolicy, deterministic_action, make_actor_critic
+from torchrl.envs.utils import ExplorationType, set_exploration_type
+
+from ppo_torchrl.models import NumpyPolicy, deterministic_action, deterministic_policy, make_actor_critic
 from conftest import compose_config
 
 SPEC = EnvSpec(obs_dim=5, action_dim=2, action_low=np.array([-1.0, -3.0], np.float32),
@@ -107,3 +109,19 @@ def test_torchrl_env_clips_the_action_it_receives_per_dimension():
     clip = ClipActionToBounds(torch.tensor([-1.0, -0.4]), torch.tensor([1.0, 0.4]))
     td = clip.inv(TensorDict({"action": torch.tensor([[3.0, -3.0]])}, [1]))
     torch.testing.assert_close(td["action"], torch.tensor([[1.0, -0.4]]))
+
+
+@pytest.mark.parametrize("head", ["normal", "tanh_normal"])
+def test_deterministic_policy_is_the_actor_in_deterministic_mode(head):
+    """The eval's light policy gives the env exactly what the ProbabilisticActor does in DETERMINISTIC mode
+    (a normal head's action clipped to the bounds, as the eval env's ClipActionToBounds does)."""
+    ac = build(f"policy={head}", "policy.policy_head_gain=3.0")  # big means: some actions out of bounds
+    obs = torch.randn(256, 5) * 3
+    with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
+        theirs = ac.actor(TensorDict({"observation": obs}, [256]))["action"]
+        ours = deterministic_policy(ac)(TensorDict({"observation": obs}, [256]))["action"]
+    low, high = torch.as_tensor(SPEC.action_low), torch.as_tensor(SPEC.action_high)
+    if head == "normal":
+        assert ((theirs < low) | (theirs > high)).any()
+        theirs = torch.maximum(torch.minimum(theirs, high), low)
+    assert torch.equal(ours, theirs)

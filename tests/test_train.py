@@ -83,8 +83,9 @@ def test_same_seed_same_first_iterations(tiny_cfg, tmp_path):
     assert rows[0] == rows[1]
 
 
-def _steps_from_one_state(trainer, make_step, minibatches):
-    """Run `make_step()` over the minibatches from the trainer's initial weights and a fresh optimizer."""
+def _steps_from_one_state(trainer, make_step, minibatches, lrs=None):
+    """Run `make_step()` over the minibatches from the trainer's initial weights and a fresh optimizer
+    (at lr 1e-3, or at lrs[i] for minibatch i)."""
     start = [p.detach().clone() for p in trainer.params]
     with torch.no_grad():
         for p, p0 in zip(trainer.params, start):
@@ -93,7 +94,12 @@ def _steps_from_one_state(trainer, make_step, minibatches):
     trainer.optimizer.param_groups[0]["lr"] = 1e-3
     torch.manual_seed(0)
     step = make_step()
-    metrics = torch.stack([step(mb.clone())[0] for mb in minibatches])
+    rows = []
+    for i, mb in enumerate(minibatches):
+        if lrs is not None:
+            trainer.optimizer.param_groups[0]["lr"] = lrs[i]
+        rows.append(step(mb.clone())[0])
+    metrics = torch.stack(rows)
     after = [p.detach().clone() for p in trainer.params]
     state = {k: {n: v.clone() for n, v in s.items()} for k, s in trainer.optimizer.state_dict()["state"].items()}
     with torch.no_grad():
@@ -147,9 +153,10 @@ def test_compiled_run_matches_its_eager_step(tiny_cfg, tmp_path):
     trainer.prepare(batch)
     flat = batch.reshape(-1).select(*LOSS_INPUT_KEYS, strict=False)
     minibatches = [flat[i * 64:(i + 1) * 64] for i in range(3)]
+    lrs = [1e-3, 5e-4, 3e-3]  # the compiled step guards on tensors only: a new lr (a tensor) must still count
     args = (trainer.loss_module, trainer.optimizer, trainer.params, True, trainer.cfg.optim.max_grad_norm)
-    eager = _steps_from_one_state(trainer, lambda: FusedStep(*args, compile=False), minibatches)
-    compiled = _steps_from_one_state(trainer, lambda: trainer.minibatch_step, minibatches)
+    eager = _steps_from_one_state(trainer, lambda: FusedStep(*args, compile=False), minibatches, lrs)
+    compiled = _steps_from_one_state(trainer, lambda: trainer.minibatch_step, minibatches, lrs)
     torch.testing.assert_close(compiled[0], eager[0], rtol=1e-4, atol=1e-5)
     for a, b in zip(compiled[1], eager[1]):
         torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-6)
