@@ -6,19 +6,23 @@ statistics of that frame and goes on training; the worker runs the same `evaluat
 TorchRL env, statistics, episode seeds and deterministic actions) on the spare core. Rows of
 metrics.csv wait for their eval and are written in order once it is back, so the file reads as if
 the eval had run in line: its columns sit on the row of the frame it was taken at. The best
-checkpoint is the state of that frame. The final eval runs in line, after the pending ones are back.
+checkpoint is the state of that frame. The final eval runs once the pending ones are back, its episodes
+shared between the trainer and the worker (`BackgroundEval.evaluate`).
 Only evaluation runs there: the training arithmetic stays on one core.
 """
 
 from __future__ import annotations
 
+import copy
 import multiprocessing as mp
 import os
 import queue
 import signal
 from typing import Callable, Dict, List
 
+from ppo_torchrl.envs import episode_seeds
 from ppo_torchrl.errors import ConfigError
+from ppo_torchrl.evaluate import evaluate_policy, merge_episodes, run_episodes, summarize
 
 BACKGROUND_AUTO_MIN_FRAMES = 150_000
 BACKGROUND_CHOICES = ("auto", "true", "false")
@@ -46,7 +50,7 @@ class BackgroundEval:
                                         args=(OmegaConf.to_container(cfg, resolve=True), self._jobs,
                                               self._results, os.getpid()))
         self._process.start()
-        self._write_row, self._on_result = write_row, on_result
+        self._cfg, self._write_row, self._on_result = cfg, write_row, on_result
         self._pending: Dict[int, object] = {}  # frames -> what on_result gets back with the result
         self._waiting: List[dict] = []  # rows logged while an earlier eval is out, in order
 
@@ -63,23 +67,49 @@ class BackgroundEval:
     def poll(self, block: bool = False) -> None:
         """Take the evals that are back; with block, wait for all of them."""
         while self._pending:
-            try:
-                frames, result, error = self._results.get(block=block, timeout=1.0 if block else None)
-            except queue.Empty:
-                if not block:
-                    break
-                if not self._process.is_alive():
-                    raise RuntimeError(f"the background eval process exited (code {self._process.exitcode})")
-                continue
-            if error is not None:
-                name, message, config_error = error
-                raise ConfigError(message) if config_error else RuntimeError(f"background eval: {name}: {message}")
+            back = self._receive(block)
+            if back is None:
+                break
+            frames, result = back
             columns = self._on_result(frames, result, self._pending.pop(frames))
             for row in self._waiting:
                 if row["frames"] == frames:
                     row.update(columns)
         while self._waiting and self._waiting[0]["frames"] not in self._pending:
             self._write_row(self._waiting.pop(0))
+
+    def evaluate(self, ac, obs_stats, episodes: int, seed: int, deterministic: bool, video_path=None) -> dict:
+        """An eval now (the final one, after `poll(block=True)`), its episodes shared with the idle worker:
+        each episode starts from its own seed, so the figures are those of `evaluate_policy` in line, in
+        about half the time. Stochastic evals (the worker's own random stream) and robot envs (whose eval
+        env may carry state, e.g. a terrain curriculum, from episode to episode) run wholly in line."""
+        if episodes < 2 or not deterministic or self._cfg.env.xml_file is not None or self._pending:
+            return evaluate_policy(self._cfg, ac, obs_stats, episodes, seed=seed, deterministic=deterministic,
+                                   video_path=video_path)
+        seeds = episode_seeds(seed, episodes)
+        half = episodes // 2
+        actor = {k: v.detach().to("cpu", copy=True) for k, v in ac.actor.state_dict().items()}
+        self._jobs.put({"frames": None, "actor": actor, "obs_stats": copy.deepcopy(obs_stats), "seeds": seeds[half:],
+                        "seed": seed, "deterministic": True})
+        mine = run_episodes(self._cfg, ac, obs_stats, seeds[:half], True, video_path)
+        return summarize(self._cfg, merge_episodes(mine, self._receive(block=True)[1]))
+
+    def _receive(self, block: bool):
+        """(frames, result) of the next eval back; None when none is (block=False). A worker's error is
+        raised here: a ConfigError as one line, anything else as a bug."""
+        while True:
+            try:
+                frames, result, error = self._results.get(block=block, timeout=1.0 if block else None)
+                break
+            except queue.Empty:
+                if not block:
+                    return None
+                if not self._process.is_alive():
+                    raise RuntimeError(f"the background eval process exited (code {self._process.exitcode})")
+        if error is not None:
+            name, message, config_error = error
+            raise ConfigError(message) if config_error else RuntimeError(f"background eval: {name}: {message}")
+        return frames, result
 
     def close(self) -> None:
         """Stop the worker; rows still waiting are written without the evals that are not back."""
@@ -104,7 +134,6 @@ def _serve(cfg_dict: dict, jobs, results, parent_pid: int) -> None:
     from omegaconf import OmegaConf
 
     from ppo_torchrl.envs import env_spec, seed_everything
-    from ppo_torchrl.evaluate import evaluate_policy
     from ppo_torchrl.models import make_actor_critic
 
     torch.set_num_threads(1)
@@ -122,8 +151,12 @@ def _serve(cfg_dict: dict, jobs, results, parent_pid: int) -> None:
         try:
             ac.actor.load_state_dict(job["actor"])
             seed_everything(job["seed"])  # a stochastic eval draws from this process's own stream
-            result = evaluate_policy(cfg, ac, job["obs_stats"], job["episodes"], seed=job["seed"],
-                                     deterministic=job["deterministic"], video_path=job["video_path"], progress=False)
+            if "seeds" in job:  # a share of an eval's episodes: their record, merged by the trainer
+                result = run_episodes(cfg, ac, job["obs_stats"], job["seeds"], job["deterministic"], progress=False)
+            else:
+                result = evaluate_policy(cfg, ac, job["obs_stats"], job["episodes"], seed=job["seed"],
+                                         deterministic=job["deterministic"], video_path=job["video_path"],
+                                         progress=False)
             results.put((job["frames"], result, None))
         except Exception as exc:  # noqa: BLE001  raised again in the trainer, as one line or as a bug
             results.put((job["frames"], None, (type(exc).__name__, str(exc), isinstance(exc, ConfigError))))

@@ -21,7 +21,7 @@ import math
 import sys
 import time
 from pathlib import Path
-from typing import Optional
+from typing import Optional, Sequence
 
 import numpy as np
 import torch
@@ -62,7 +62,6 @@ class EpisodeProgress:
         self.last, self.shown = now, True
 
 
-@torch.no_grad()
 def evaluate_policy(cfg, ac: ActorCritic, obs_stats: Optional[dict], episodes: int, seed: int,
                     deterministic: bool = True, video_path: Optional[Path] = None,
                     progress: Optional[bool] = None) -> dict:
@@ -71,6 +70,21 @@ def evaluate_policy(cfg, ac: ActorCritic, obs_stats: Optional[dict], episodes: i
     progress: True reports each episode on stderr (EpisodeProgress), False never, None only once the
     eval has run for QUIET_S seconds (so short evals during training stay silent).
     """
+    return summarize(cfg, run_episodes(cfg, ac, obs_stats, episode_seeds(seed, episodes), deterministic,
+                                       video_path, progress))
+
+
+def merge_episodes(first: dict, second: dict) -> dict:
+    """Two `run_episodes` records of one eval (the episodes split between two processes), in order."""
+    return {k: first[k] + second[k] if isinstance(first[k], list) else first[k] for k in first}
+
+
+@torch.no_grad()
+def run_episodes(cfg, ac: ActorCritic, obs_stats: Optional[dict], seeds: Sequence[int], deterministic: bool = True,
+                 video_path: Optional[Path] = None, progress: Optional[bool] = None) -> dict:
+    """One episode per seed (each starts from `env.set_seed(seed)`, so any subset of an eval's seeds
+    gives the same episodes it gives there); the per-episode record that `summarize` reads."""
+    episodes = len(seeds)
     render = {"render_mode": "rgb_array", "width": VIDEO_SIZE[0], "height": VIDEO_SIZE[1]} if video_path else {}
     env = make_torchrl_env(cfg.env, clip_actions=ac.head == "normal", gamma=cfg.advantage.gamma,
                            obs_stats=obs_stats, train=False, **render)
@@ -91,7 +105,7 @@ def evaluate_policy(cfg, ac: ActorCritic, obs_stats: Optional[dict], episodes: i
     try:
         with set_exploration_type(mode):
             shown = EpisodeProgress(episodes, progress)
-            for i, episode_seed in enumerate(episode_seeds(seed, episodes)):
+            for i, episode_seed in enumerate(seeds):
                 env.set_seed(episode_seed)
                 start = env.reset()
                 xy_start = sim.qpos[:2].copy() if sim is not None else None
@@ -121,6 +135,15 @@ def evaluate_policy(cfg, ac: ActorCritic, obs_stats: Optional[dict], episodes: i
         env.close()
     if video_path is not None:
         write_video(video_path, frames)
+    return {"returns": returns, "lengths": lengths, "distances": distances, "gaits": gaits, "crossed": crossed,
+            "heights": heights, "dt": gym_env.unwrapped.dt if sim is not None else None,
+            "success_margin": loco.success_margin if crossed else None}
+
+
+def summarize(cfg, episodes: dict) -> dict:
+    """The eval's figures from `run_episodes`' record."""
+    returns, lengths, distances = episodes["returns"], episodes["lengths"], episodes["distances"]
+    crossed, gaits = episodes["crossed"], episodes["gaits"]
     result = {
         "return_mean": float(np.mean(returns)),
         "return_std": float(np.std(returns)),
@@ -131,13 +154,13 @@ def evaluate_policy(cfg, ac: ActorCritic, obs_stats: Optional[dict], episodes: i
     }
     if distances:
         # Forward progress of the base along its heading: mean velocity over each episode, and where it ended.
-        dt = gym_env.unwrapped.dt
+        dt = episodes["dt"]
         velocities = [d / (n * dt) for (d, _), n in zip(distances, lengths)]
         result.update(forward_velocity_mean=float(np.mean(velocities)), forward_velocity_std=float(np.std(velocities)),
                       x_final_mean=float(np.mean([x1 for _, x1 in distances])))
         if crossed:  # a step env: the env's criterion, the trunk success_margin beyond the step's edge
-            result.update(success_rate=float(np.mean(crossed)), success_margin=loco.success_margin,
-                          step_height_mean=float(np.mean(heights)))
+            result.update(success_rate=float(np.mean(crossed)), success_margin=episodes["success_margin"],
+                          step_height_mean=float(np.mean(episodes["heights"])))
         elif cfg.eval.get("success_x") is not None:
             result["success_rate"] = float(np.mean([x1 >= cfg.eval.success_x for _, x1 in distances]))
             result["success_x"] = float(cfg.eval.success_x)

@@ -12,6 +12,7 @@ import random
 import sys
 import time
 from collections import deque
+from functools import partial
 from pathlib import Path
 from typing import Optional
 
@@ -309,7 +310,9 @@ class Trainer:
             self.evals.submit(self.frames, dict(actor=actor, obs_stats=copy.deepcopy(self.collector.obs_stats()),
                                                 episodes=episodes, **job), keep)
             return {}
-        result = evaluate_policy(self.cfg, self.ac, self.collector.obs_stats(), episodes, **job)
+        # in line; with a worker (the final eval), it takes a share of the episodes
+        evaluate = self.evals.evaluate if self.evals is not None else partial(evaluate_policy, self.cfg)
+        result = evaluate(self.ac, self.collector.obs_stats(), episodes, **job)
         return self._eval_done(self.frames, result, None)
 
     def _eval_done(self, frames: int, result: dict, state_then: Optional[dict]) -> dict:

@@ -173,11 +173,12 @@ def test_compile_auto_only_for_long_runs(tiny_cfg):
 
 def test_background_eval_writes_what_the_in_line_eval_writes(tiny_cfg, tmp_path):
     """eval.background=true: the worker process evaluates the same weights with the same seeds; each row
-    waits for its eval, so metrics.csv holds the same values (timings aside) in the same order."""
+    waits for its eval, so metrics.csv holds the same values (timings aside) in the same order. The
+    final eval's episodes are shared between the trainer and the worker: the same figures too."""
     tables = {}
     for mode in ("false", "true"):
         cfg = tiny_cfg("collector.total_frames=1024", "eval.every_frames=512", "eval.episodes=2",
-                       f"eval.background={mode}")
+                       "eval.final_episodes=3", f"eval.background={mode}")
         trainer = Trainer(cfg, tmp_path / mode)
         assert trainer.train()["status"] == "finished"
         assert trainer.evals is None if mode == "false" else trainer.evals is not None
