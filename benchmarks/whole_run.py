@@ -104,7 +104,9 @@ def main() -> None:
     can_pin = shutil.which("taskset") and os.cpu_count() >= 2 and not args.sequential
     pin = (lambda core: ["taskset", "-c", str(core)]) if can_pin else (lambda core: [])
     env = {**os.environ, "PYTHONWARNINGS": "ignore", "OMP_NUM_THREADS": "1"}
-    raw = raw_env_rate()
+    # The raw step rate drifts with the shared host by up to ~30% within minutes: measured before and
+    # after each side, and the share column divides by the mean of those measurements.
+    raws = [raw_env_rate()]
     app_cmd = [*pin(0), sys.executable, "-m", "ppo_torchrl", *env_args, f"collector.total_frames={args.frames}",
                "torch_threads=1", f"hydra.run.dir={app_run}"]
     sb3_cmd = [*pin(1), sys.executable, __file__, "--frames", str(args.frames), "--sb3-child", str(sb3_dir),
@@ -126,6 +128,8 @@ def main() -> None:
                     if proc.returncode != 0:
                         raise SystemExit(f"{name} failed:\n{proc.stderr.read().decode()[-3000:]}")
             time.sleep(0.5)
+        raws.append(raw_env_rate())
+    raw = sum(raws) / len(raws)
     summary = json.loads((app_run / "summary.json").read_text())
     sb3 = json.loads((sb3_dir / "bench.json").read_text())
     frames_app = summary["frames"]
@@ -137,7 +141,8 @@ def main() -> None:
              f"{' --sequential' if args.sequential else ''}` ({stamp}); "
              + ("one after the other, each alone on the machine (the app's evals in its second process)"
                 if args.sequential else "side by side, one core each (the app's evals in line)")
-             + f"; raw Hopper-v4 step rate {raw:,.0f} steps/s", "",
+             + f"; raw Hopper-v4 step rate {raw:,.0f} steps/s (the mean of {', '.join(f'{r:,.0f}' for r in raws)}: "
+             "measured before and after each side)", "",
              f"| side | wall s (process) | in-loop frames/s | share of raw env rate | time to last-100 >= {args.score:.0f} (s) | peak RSS MB |",
              "|---|---|---|---|---|---|"]
     for name, wall, inner, tts, peak in rows:

@@ -256,11 +256,11 @@ class Trainer:
         epochs, step = cfg.loss.epochs, self.minibatch_step
         rows, grad_norms = [], []
         for epoch in range(epochs):
-            shuffled = flat[torch.randperm(n, device=self.device)]  # one gather per epoch; minibatches are slices
-            for start in range(0, n, mb_size):
-                metrics, grad_norm = step(shuffled[start:start + mb_size])
+            shuffled = flat[torch.randperm(n, device=self.device)]  # one gather per epoch; minibatches are views
+            for index, minibatch in enumerate(shuffled.split(mb_size)):
+                metrics, grad_norm = step(minibatch)
                 if not torch.isfinite(metrics[0] + grad_norm):  # the step was not taken
-                    self._non_finite("loss" if not torch.isfinite(metrics[0]) else "gradient", epoch, start // mb_size)
+                    self._non_finite("loss" if not torch.isfinite(metrics[0]) else "gradient", epoch, index)
                 rows.append(metrics)
                 grad_norms.append(grad_norm)
         if not all(torch.isfinite(p).all() for p in self.params):
