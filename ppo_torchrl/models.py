@@ -203,9 +203,9 @@ class NumpyPolicy:
     def act(self, obs: np.ndarray, noise: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
         """(action to store, action to send to the env) for observations [n, obs_dim]."""
         loc, scale = self.loc_scale(obs)
-        base = (loc + scale * noise).astype(np.float32)
-        if self.squash:
-            action = self.mid + self.half * np.clip(np.tanh(base), -self.tanh_limit, self.tanh_limit)
+        base = (loc + scale * noise).astype(np.float32, copy=False)
+        if self.squash:  # np.clip's values without its Python wrapper (a few microseconds a step)
+            action = self.mid + self.half * np.minimum(np.maximum(np.tanh(base), -self.tanh_limit), self.tanh_limit)
             return action, action
         return base, np.minimum(np.maximum(base, self.low), self.high)
 

@@ -255,22 +255,28 @@ class Trainer:
         mb_size = cfg.loss.minibatch_size or n
         epochs, step = cfg.loss.epochs, self.minibatch_step
         rows, grad_norms = [], []
-        for epoch in range(epochs):
+        for _ in range(epochs):
             shuffled = flat[torch.randperm(n, device=self.device)]  # one gather per epoch; minibatches are views
-            for index, minibatch in enumerate(shuffled.split(mb_size)):
-                metrics, grad_norm = step(minibatch)
-                if not torch.isfinite(metrics[0] + grad_norm):  # the step was not taken
-                    self._non_finite("loss" if not torch.isfinite(metrics[0]) else "gradient", epoch, index)
+            for minibatch in shuffled.split(mb_size):
+                metrics, grad_norm = step(minibatch)  # a non-finite loss or gradient: that step is not taken
                 rows.append(metrics)
                 grad_norms.append(grad_norm)
+        # Checked once per update, not per minibatch (a tensor-to-bool sync each): the run stops all the
+        # same, and the message names the first minibatch whose step was skipped.
+        metrics, grad_norms = torch.stack(rows), torch.stack(grad_norms)
+        finite = torch.isfinite(metrics[:, 0] + grad_norms)
+        if not finite.all():
+            first = int((~finite).nonzero()[0])
+            per_epoch = len(rows) // epochs
+            quantity = "loss" if not torch.isfinite(metrics[first, 0]) else "gradient"
+            self._non_finite(quantity, first // per_epoch, first % per_epoch)
         if not all(torch.isfinite(p).all() for p in self.params):
             self._non_finite("parameter", epochs - 1, None)
-        if rows:
-            means = torch.stack(rows).mean(0).tolist()
-            stats["loss/total"] = means[0]
-            for key, value in zip(step.metric_keys, means[1:]):
-                stats[LOSS_METRICS[key]] = value
-            stats["train/grad_norm"] = torch.stack(grad_norms).mean().item()
+        means = metrics.mean(0).tolist()
+        stats["loss/total"] = means[0]
+        for key, value in zip(step.metric_keys, means[1:]):
+            stats[LOSS_METRICS[key]] = value
+        stats["train/grad_norm"] = grad_norms.mean().item()
         return stats
 
     def _non_finite(self, quantity: str, epoch: int, minibatch: Optional[int]) -> None:
