@@ -175,7 +175,7 @@ class NumpyPolicy:
         """Copy the current weights of the policy net (one numpy function per layer)."""
         def linear(layer: nn.Linear):
             w, b = layer.weight.detach().cpu().numpy().T.copy(), layer.bias.detach().cpu().numpy().copy()
-            return lambda x: x @ w + b
+            return lambda x: x.dot(w) + b  # ndarray.dot: the same product as @, a little less call overhead
 
         self.layers = []
         for module in self._flatten(self.ac.policy_net):

@@ -13,6 +13,7 @@ both paths (SB3 VecNormalize's rule, with its prior count).
 
 from __future__ import annotations
 
+import math
 from typing import Dict, Optional
 
 import numpy as np
@@ -64,6 +65,19 @@ class RunningMeanStd:
         self.var = m2 / total
         self.count = total
 
+    def update_scalar(self, x: float) -> None:
+        """update() of a scalar statistic with one value, on Python floats: the same IEEE-double
+        arithmetic as the per-step case above (x * x is what numpy's square computes), without the
+        cost of numpy calls on 0-d arrays (~3 us a step; the fast collector with one env)."""
+        if self.frozen:
+            return
+        mean, var, count = float(self.mean), float(self.var), self.count
+        delta = x - mean
+        total = count + 1
+        self.mean = np.float64(mean + delta / total)
+        self.var = np.float64((var * count + delta * delta * count / total) / total)
+        self.count = total
+
     def state_dict(self) -> Dict[str, object]:
         return {"mean": self.mean.copy(), "var": self.var.copy(), "count": float(self.count)}
 
@@ -109,6 +123,13 @@ class ReturnNormalizer:
         self.epsilon = epsilon
 
     def __call__(self, reward: np.ndarray, done: np.ndarray) -> np.ndarray:
+        if self.returns.size == 1:  # one env: the same arithmetic on Python floats, ~7x cheaper a step
+            r = float(reward[0])
+            ret = float(self.returns[0]) * self.gamma + r
+            self.stats.update_scalar(ret)
+            self.returns[0] = 0.0 if done[0] else ret
+            scaled = r / math.sqrt(float(self.stats.var) + self.epsilon)
+            return scaled if self.clip is None else min(max(scaled, -self.clip), self.clip)
         self.returns = self.returns * self.gamma + reward
         self.stats.update(self.returns)
         self.returns[done] = 0.0

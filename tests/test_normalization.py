@@ -29,6 +29,24 @@ def test_return_normalizer_scales_by_discounted_return_std_and_resets_on_done():
     np.testing.assert_allclose(scaled, 2.0 / np.sqrt(norm.stats.var + 1e-8))
 
 
+def test_one_env_return_scaling_is_the_array_arithmetic_bit_for_bit():
+    """One env takes a Python-float path (normalization.ReturnNormalizer); it must give exactly what the
+    array arithmetic of several envs gives, step by step, clipping and resets included."""
+    rng = np.random.default_rng(0)
+    one = ReturnNormalizer(num_envs=1, gamma=0.99, clip=3.0)
+    stats, returns = RunningMeanStd(()), np.zeros(1)
+    for _ in range(2000):
+        reward, done = rng.normal(size=1) * 5.0, np.array([rng.random() < 0.02])
+        got = one(reward, done)
+        returns = returns * 0.99 + reward
+        stats.update(returns)
+        returns[done] = 0.0
+        want = np.minimum(np.maximum(reward / np.sqrt(stats.var + 1e-8), -3.0), 3.0)
+        assert got == want[0] and one.returns[0] == returns[0]
+    assert (one.stats.mean, one.stats.var, one.stats.count) == (stats.mean, stats.var, stats.count)
+    assert np.array_equal(one.stats.state_dict()["var"], stats.state_dict()["var"])
+
+
 def test_both_backends_normalizers_give_numpys_mean_and_var_of_the_same_stream():
     """A real Hopper-v4 stream (random actions, resets included) through TorchRL's VecNorm, as the
     torchrl backend runs it, and through the fast collector's normalizer: both equal numpy's."""
