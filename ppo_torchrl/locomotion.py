@@ -314,6 +314,7 @@ class LocomotionEnv(AntEnv):
         self._level_step = float(terrain.get("curriculum_step") or 0.02)
         self._threshold = float(terrain.get("curriculum_threshold") or 0.8)
         self.outcomes = deque(maxlen=int(terrain.get("curriculum_window") or 20))
+        self.recent = deque(maxlen=self.outcomes.maxlen)  # the same outcomes, kept across level changes (logged)
         depth = 2 * self._half[2]
         top = max([self._fixed_height or 0.0, *(self._height_range or ())])
         if top > depth:
@@ -367,9 +368,17 @@ class LocomotionEnv(AntEnv):
     def _record_outcome(self, success: bool) -> None:
         """The curriculum: widen [min, level] by curriculum_step once the recent success rate passes the threshold."""
         self.outcomes.append(bool(success))
+        self.recent.append(bool(success))
         if len(self.outcomes) == self.outcomes.maxlen and np.mean(self.outcomes) >= self._threshold:
             self.level = min(self.level + self._level_step, self._height_range[1])
             self.outcomes.clear()
+
+    def terrain_metrics(self) -> dict:
+        """What a training run logs of its curriculum: the top of the height range now (m) and the share of
+        the last curriculum_window episodes that crossed; {} without a curriculum (evaluation included)."""
+        if not (self.has_step and self._curriculum):
+            return {}
+        return {"env/terrain_level": self.level, "env/terrain_success": float(np.mean(self.recent)) if self.recent else 0.0}
 
     def crossed(self) -> bool:
         """Success on a step env: the main body is success_margin beyond the step's edge."""
@@ -491,7 +500,7 @@ class LocomotionEnv(AntEnv):
                  "xpos": self.data.xpos.copy()}
         if self.has_step:
             state.update(step_height=self.step_height, step_edge=self.step_edge, level=self.level,
-                         outcomes=list(self.outcomes))
+                         outcomes=list(self.outcomes), recent=list(self.recent))
         return state
 
     def set_extra_state(self, state: dict) -> None:
@@ -504,6 +513,8 @@ class LocomotionEnv(AntEnv):
             self.level = state["level"]
             self.outcomes.clear()
             self.outcomes.extend(state["outcomes"])
+            self.recent.clear()
+            self.recent.extend(state.get("recent", state["outcomes"]))
             mujoco.mj_forward(self.model, self.data)  # contacts with the step where it now is
         if "xpos" in state:
             self.data.xpos[:] = state["xpos"]

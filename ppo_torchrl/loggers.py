@@ -24,6 +24,7 @@ COLUMNS = [
     "loss/objective", "loss/critic", "loss/entropy", "loss/total",
     "train/entropy", "train/approx_kl", "train/clipfrac", "train/explained_variance", "train/grad_norm",
     "policy/loc_mean", "policy/scale_mean", "train/value_mean", "train/advantage_std",
+    "env/terrain_level", "env/terrain_success",  # a step env's curriculum (collector.env_metrics)
 ]
 EXTRA = {"tensorboard": "tensorboard", "wandb": "wandb", "mlflow": "mlflow-skinny"}
 
@@ -82,6 +83,9 @@ class MetricsFile:
     def __init__(self, path: Path, columns: List[str], append: bool = False):
         self.path = Path(path)
         append = append and self.path.exists()
+        if append:  # a resumed run keeps its file's header (one written by an older build may have fewer columns)
+            with open(self.path, newline="") as f:
+                columns = next(csv.reader(f), None) or columns
         self._file = open(self.path, "a" if append else "w", newline="")
         self._writer = csv.DictWriter(self._file, fieldnames=columns, extrasaction="ignore")
         if not append:

@@ -304,6 +304,7 @@ class Trainer:
             stats["train/episode_length"] = float(np.mean([n for _, n in finished]))
         if self.recent_returns:
             stats["train/return_last100"] = float(np.mean(self.recent_returns))
+        stats.update(self.collector.env_metrics())
         return stats
 
     def _evaluate(self, episodes: int, background: bool = False) -> dict:

@@ -113,6 +113,8 @@ def test_step_height_is_drawn_in_range_and_the_curriculum_widens_on_success():
     env.step(np.zeros(12, np.float32))
     env.reset()  # a failure (the trunk is back at the start) does not widen it
     assert loco.level == pytest.approx(0.1)
+    # logged each iteration: the level, and the success share of the last window (2) of episodes
+    assert loco.terrain_metrics() == {"env/terrain_level": pytest.approx(0.1), "env/terrain_success": 0.5}
 
     heights = set()
     for seed in range(20):  # no curriculum: the whole range
@@ -262,6 +264,12 @@ def step_run(tmp_path_factory):
                           "policy.critic_hidden_sizes=[16,16]"])
     Trainer(cfg, run).train()
     return run
+
+
+def test_a_curriculum_run_logs_its_level_and_success(step_run):
+    rows = list(csv.DictReader(open(step_run / "metrics.csv")))
+    assert rows and all(float(r["env/terrain_level"]) == 0.0 and 0.0 <= float(r["env/terrain_success"]) <= 1.0
+                        for r in rows)
 
 
 def test_evaluate_at_a_step_height_reports_gait_figures(step_run):

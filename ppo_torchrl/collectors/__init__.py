@@ -34,6 +34,10 @@ class Collector(Protocol):
     def pop_episodes(self) -> List[Tuple[float, int]]:
         """(raw return, length) of the episodes finished since the last call."""
 
+    def env_metrics(self) -> Dict[str, float]:
+        """Scalars the envs keep, logged each iteration: a step env's curriculum level and recent success
+        rate (`LocomotionEnv.terrain_metrics`); {} where the envs say nothing or live in other processes."""
+
     def obs_stats(self) -> Optional[dict]:
         """Observation statistics {"mean", "var", "count"} (None without normalization)."""
 

@@ -8,7 +8,7 @@ it returns has TorchRL's layout and keys.
 
 from __future__ import annotations
 
-from typing import List, Optional, Tuple
+from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 import torch
@@ -131,6 +131,11 @@ class FastCollector:
     def pop_episodes(self) -> List[Tuple[float, int]]:
         finished, self._finished = self._finished, []
         return finished
+
+    def env_metrics(self) -> Dict[str, float]:
+        reports = [env.unwrapped.terrain_metrics() for env in self.envs if hasattr(env.unwrapped, "terrain_metrics")]
+        reports = [r for r in reports if r]
+        return {key: float(np.mean([r[key] for r in reports])) for key in reports[0]} if reports else {}
 
     def obs_stats(self) -> Optional[dict]:
         return self.obs_norm.stats.state_dict() if self.obs_norm.enabled else None

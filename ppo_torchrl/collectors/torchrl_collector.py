@@ -78,6 +78,9 @@ class TorchRLCollector:
     def _return_norm(self) -> Optional[ReturnNormalization]:
         return next((t for t in self.env.transform if isinstance(t, ReturnNormalization)), None)
 
+    def env_metrics(self) -> dict:
+        return {}  # the Gymnasium envs sit inside TorchRL's wrapper (and, with workers, in other processes)
+
     def obs_stats(self) -> Optional[dict]:
         return torchrl_obs_stats(self.obs_norm, self._seen)
 
