@@ -101,6 +101,9 @@ class TerrainConfig:
     curriculum_threshold: float = 0.8
     curriculum_window: int = 20  # episodes
     curriculum_step: float = 0.02  # m
+    # Narrow it again by curriculum_step when that success rate falls to this or below (legged_gym moves
+    # a robot down a level as well as up); null: the level only rises.
+    curriculum_down_threshold: Optional[float] = None
     step_distance: Optional[List[float]] = None  # [min, max] m from main_body's start to the edge, drawn per episode
     success_margin: float = 0.5  # m: an episode succeeds when main_body ends this far beyond the edge
     # Evaluation envs (periodic eval, evaluate): this fixed height unless step_height is set; null:

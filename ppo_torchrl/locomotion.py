@@ -313,6 +313,8 @@ class LocomotionEnv(AntEnv):
         self.level = self._height_range[0] if self._height_range else self.step_height  # curriculum: the range's top now
         self._level_step = float(terrain.get("curriculum_step") or 0.02)
         self._threshold = float(terrain.get("curriculum_threshold") or 0.8)
+        down = terrain.get("curriculum_down_threshold")
+        self._down_threshold = None if down is None else float(down)
         self.outcomes = deque(maxlen=int(terrain.get("curriculum_window") or 20))
         self.recent = deque(maxlen=self.outcomes.maxlen)  # the same outcomes, kept across level changes (logged)
         depth = 2 * self._half[2]
@@ -366,11 +368,18 @@ class LocomotionEnv(AntEnv):
         self._place_step(height, distance)
 
     def _record_outcome(self, success: bool) -> None:
-        """The curriculum: widen [min, level] by curriculum_step once the recent success rate passes the threshold."""
+        """The curriculum: widen [min, level] by curriculum_step once the success rate of a full window
+        reaches the threshold; narrow it by as much when it falls to the down threshold (if set)."""
         self.outcomes.append(bool(success))
         self.recent.append(bool(success))
-        if len(self.outcomes) == self.outcomes.maxlen and np.mean(self.outcomes) >= self._threshold:
+        if len(self.outcomes) < self.outcomes.maxlen:
+            return
+        rate = np.mean(self.outcomes)
+        if rate >= self._threshold:
             self.level = min(self.level + self._level_step, self._height_range[1])
+            self.outcomes.clear()
+        elif self._down_threshold is not None and rate <= self._down_threshold:
+            self.level = max(self.level - self._level_step, self._height_range[0])
             self.outcomes.clear()
 
     def terrain_metrics(self) -> dict:

@@ -163,6 +163,9 @@ def terrain_checks(terrain) -> list:
          f"env.terrain.curriculum_threshold={terrain.curriculum_threshold} must be in (0, 1]: a success rate"),
         (terrain.curriculum_window >= 1, f"env.terrain.curriculum_window={terrain.curriculum_window} must be >= 1"),
         (terrain.curriculum_step > 0, f"env.terrain.curriculum_step={terrain.curriculum_step} must be > 0 (m)"),
+        (terrain.curriculum_down_threshold is None or 0 <= terrain.curriculum_down_threshold < terrain.curriculum_threshold,
+         f"env.terrain.curriculum_down_threshold={terrain.curriculum_down_threshold} must be in "
+         f"[0, curriculum_threshold={terrain.curriculum_threshold}): a success rate"),
         (not terrain.curriculum or terrain.step_height_range is not None,
          "env.terrain.curriculum=true needs env.terrain.step_height_range=[min, max] to widen"),
         (terrain.success_margin >= 0, f"env.terrain.success_margin={terrain.success_margin} must be >= 0 (m)"),

@@ -125,6 +125,26 @@ def test_step_height_is_drawn_in_range_and_the_curriculum_widens_on_success():
     assert max(heights) > 0.1
 
 
+def test_the_curriculum_steps_down_when_success_falls_to_the_down_threshold():
+    env = env_of("env=quadruped_step", "env.terrain.curriculum_window=2", "env.terrain.curriculum_threshold=1",
+                 "env.terrain.curriculum_down_threshold=0", "env.terrain.curriculum_step=0.05")
+    loco = env.unwrapped
+    env.reset(seed=0)
+
+    def episode(cross: bool):
+        env.step(np.zeros(12, np.float32))
+        if cross:
+            loco.data.qpos[0] = loco.step_edge + 1.0
+            mujoco.mj_kinematics(loco.model, loco.data)
+        env.reset()
+
+    for outcome, level in [(True, 0.0), (True, 0.05), (True, 0.05), (True, 0.1), (False, 0.1), (True, 0.1),
+                           (False, 0.1), (False, 0.05), (False, 0.05), (False, 0.0), (False, 0.0), (False, 0.0)]:
+        episode(outcome)
+        assert loco.level == pytest.approx(level)  # a full window of 2: both crossed -> up, none -> down, else stay
+    assert loco.level >= 0.0 and 0.0 <= loco.step_height <= loco.level + 1e-12
+
+
 def test_the_curriculum_and_the_step_travel_with_the_env_state():
     env = env_of("env=quadruped_step", "env.terrain.curriculum_window=1", "env.terrain.curriculum_threshold=1")
     env.reset(seed=0)
@@ -236,6 +256,7 @@ def test_the_a1like_quadruped_faces_minus_x_stands_and_gets_a_tracking_camera():
     (["env.terrain.step_height_range=[-0.1,0.1]"], "must be [min, max] with 0 <= min <= max"),
     (["env.terrain.step_distance=[3,2]"], "env.terrain.step_distance=[3.0, 2.0] must be [min, max]"),
     (["env.terrain.curriculum_threshold=1.5"], "curriculum_threshold=1.5 must be in (0, 1]"),
+    (["env.terrain.curriculum_down_threshold=0.9"], "curriculum_down_threshold=0.9 must be in [0, curriculum_threshold=0.8)"),
     (["env.terrain.height_samples=-1"], "height_samples=-1 must be >= 0"),
     (["env.terrain.step_height=2"], "taller than the model's step box is deep"),
     (["env.locomotion.heading=north"], "env.locomotion.heading=north is not known"),
