@@ -45,7 +45,7 @@ def main(sweep: Path, dest: Path) -> None:
     rows = copy_finished_runs(sweep, dest, lambda summary, config: summary["env"])
     for name in ("sweep_report.png", "sweep_report.md", "sweep_report.csv"):
         shutil.copy(sweep / name, dest / name)
-    # "best periodic eval": the highest of a run's periodic evals (10 deterministic episodes each), the kind of
+    # "best periodic eval": the highest of a run's deterministic evals (eval.episodes each, eval.final_episodes at the end), the kind of
     # figure Tianshou's tables give (the max over training), from far fewer evals than theirs.
     lines = ["| env | seeds | frames | train return, last 100 (mean +- sample std) | per seed | deterministic eval (mean +- sample std) | best periodic eval (mean +- sample std) | SPS per run | wall s per run |",
              "|---|---|---|---|---|---|---|---|---|"]

@@ -1,4 +1,4 @@
-"""Loggers: `logger=csv|none` through torchrl.record.loggers, plus the run's own metrics.csv.
+"""Loggers: `logger=csv|tensorboard|wandb|mlflow|none` through torchrl.record.loggers, plus the run's own metrics.csv.
 
 Every run writes `metrics.csv` (one row per iteration, fixed columns) whatever logger is chosen:
 reports, sweeps and resume read it. The `logger` group adds an external logger on top.
