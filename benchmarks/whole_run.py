@@ -1,6 +1,6 @@
 """What a user waits for: a whole training run of this app beside Stable-Baselines3, process start to exit.
 
-    .venv/bin/python benchmarks/whole_run.py --frames 1000000 [--tuned] [--sequential] [--out results/speed/whole_run]
+    .venv/bin/python benchmarks/whole_run.py --frames 1000000 [--tuned] [--sequential] [--seed 1] [--out results/speed/whole_run]
 
 - The app runs with its defaults (periodic evals, checkpoints, csv logging all on):
   `python -m ppo_torchrl env=gym env.id=Hopper-v4 collector.total_frames=N`, whose untuned values are
@@ -36,7 +36,7 @@ from speed import raw_env_rate  # noqa: E402
 TUNED = {"gamma": 0.995, "clip_range": 0.1, "learning_rate": 1e-4, "width": 128}
 
 
-def sb3_child(frames: int, out: Path, tuned: bool) -> None:
+def sb3_child(frames: int, out: Path, tuned: bool, seed: int) -> None:
     import warnings
 
     warnings.filterwarnings("ignore")
@@ -51,11 +51,11 @@ def sb3_child(frames: int, out: Path, tuned: bool) -> None:
 
     gamma = TUNED["gamma"] if tuned else 0.99
     width = TUNED["width"] if tuned else 64
-    env = VecNormalize(make_vec_env("Hopper-v4", n_envs=1, seed=1, monitor_dir=str(out)), gamma=gamma)
+    env = VecNormalize(make_vec_env("Hopper-v4", n_envs=1, seed=seed, monitor_dir=str(out)), gamma=gamma)
     model = PPO("MlpPolicy", env, n_steps=2048, batch_size=64, n_epochs=10, gae_lambda=0.95, gamma=gamma,
                 learning_rate=(lambda f: f * TUNED["learning_rate"]) if tuned else (lambda f: f * 3e-4),
                 clip_range=TUNED["clip_range"] if tuned else 0.2, ent_coef=0.0, vf_coef=0.5, max_grad_norm=0.5,
-                policy_kwargs=dict(net_arch=dict(pi=[width, width], vf=[width, width])), seed=1, device="cpu",
+                policy_kwargs=dict(net_arch=dict(pi=[width, width], vf=[width, width])), seed=seed, device="cpu",
                 verbose=0)
     tick = time.perf_counter()
     model.learn(frames)
@@ -90,11 +90,12 @@ def main() -> None:
     parser.add_argument("--score", type=float, default=2000.0)
     parser.add_argument("--tuned", action="store_true", help="env=Hopper-v4 (tuned) and SB3 with the same values")
     parser.add_argument("--sequential", action="store_true", help="A then B, each alone on the machine")
+    parser.add_argument("--seed", type=int, default=1, help="the seed of both sides (the app's seed=, SB3's seed)")
     parser.add_argument("--out", type=Path, default=ROOT / "results" / "speed" / "whole_run")
     parser.add_argument("--sb3-child", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.sb3_child:
-        return sb3_child(args.frames, args.sb3_child, args.tuned)
+        return sb3_child(args.frames, args.sb3_child, args.tuned, args.seed)
 
     stamp = time.strftime("%Y-%m-%d_%H-%M-%S")
     work = ROOT / "outputs" / "bench_whole_run" / stamp
@@ -108,9 +109,9 @@ def main() -> None:
     # after each side, and the share column divides by the mean of those measurements.
     raws = [raw_env_rate()]
     app_cmd = [*pin(0), sys.executable, "-m", "ppo_torchrl", *env_args, f"collector.total_frames={args.frames}",
-               "torch_threads=1", f"hydra.run.dir={app_run}"]
+               "torch_threads=1", f"seed={args.seed}", f"hydra.run.dir={app_run}"]
     sb3_cmd = [*pin(1), sys.executable, __file__, "--frames", str(args.frames), "--sb3-child", str(sb3_dir),
-               *(["--tuned"] if args.tuned else [])]
+               "--seed", str(args.seed), *(["--tuned"] if args.tuned else [])]
     walls, app_peak = {}, None
     groups = [[("app", app_cmd)], [("sb3", sb3_cmd)]] if args.sequential else [[("app", app_cmd), ("sb3", sb3_cmd)]]
     for group in groups:
@@ -138,7 +139,7 @@ def main() -> None:
     setting = "env=Hopper-v4 (tuned; SB3 given the same values)" if args.tuned else "env=gym env.id=Hopper-v4 (SB3's defaults)"
     lines = [f"# Whole run, {setting}, {args.frames:,} frames ({frames_app:,} for the app: whole batches)", "",
              f"`python benchmarks/whole_run.py --frames {args.frames}{' --tuned' if args.tuned else ''}"
-             f"{' --sequential' if args.sequential else ''}` ({stamp}); "
+             f"{' --sequential' if args.sequential else ''}{f' --seed {args.seed}' if args.seed != 1 else ''}` ({stamp}); "
              + ("one after the other, each alone on the machine (the app's evals in its second process)"
                 if args.sequential else "side by side, one core each (the app's evals in line)")
              + f"; raw Hopper-v4 step rate {raw:,.0f} steps/s (the mean of {', '.join(f'{r:,.0f}' for r in raws)}: "
