@@ -80,6 +80,9 @@ class LocomotionConfig:
     # Floor each step's reward at 0 (legged_gym's only_positive_rewards): while the costs outweigh the
     # forward and healthy rewards (early, exploring), ending the episode by a fall does not pay.
     only_positive_rewards: bool = False
+    # Bodies (names) whose touching the ground or the step ends the episode, as legged_gym's
+    # terminate_after_contacts_on (e.g. [trunk]); on top of healthy_z_range. Empty: off.
+    terminate_on_contact: List[str] = field(default_factory=list)
     # The feet (geom names), for contacts, slip, air time and gait figures; empty: the geoms whose name
     # contains "foot", else every geom of a body without child bodies.
     foot_geoms: List[str] = field(default_factory=list)
@@ -104,6 +107,9 @@ class TerrainConfig:
     # Narrow it again by curriculum_step when that success rate falls to this or below (legged_gym moves
     # a robot down a level as well as up); null: the level only rises.
     curriculum_down_threshold: Optional[float] = None
+    # m: with a curriculum, draw each height from [level - band, level] (not below min) rather than
+    # from [min, level], so training stays at the hard end; null: the whole of [min, level].
+    curriculum_band: Optional[float] = None
     step_distance: Optional[List[float]] = None  # [min, max] m from main_body's start to the edge, drawn per episode
     success_margin: float = 0.5  # m: an episode succeeds when main_body ends this far beyond the edge
     # Evaluation envs (periodic eval, evaluate): this fixed height unless step_height is set; null:

@@ -21,7 +21,10 @@ configured (so a config without these keys steps exactly as Ant-v5 does):
   each step's reward at 0, as legged_gym does, so that while the costs outweigh the rest an early fall
   does not pay.
 - **Terrain** (`env.terrain.*`, models with a body named `step` holding one box geom): the step's
-  height and distance drawn per episode, from a range that a success-driven curriculum widens.
+  height and distance drawn per episode, from a range that a success-driven curriculum widens (or,
+  with `curriculum_band`, a band just under the curriculum's level that it raises).
+- **Termination on contact** (`terminate_on_contact`, legged_gym's): the episode also ends when a
+  listed body (e.g. the trunk) touches the ground or the step.
   The step is moved by `model.body_pos` at reset (no recompile; moving a geom of the world body
   instead leaves MuJoCo's collision bounding volumes stale). Its box reaches below the floor, so any
   height from 0 to the box's depth is a solid step.
@@ -59,7 +62,8 @@ MIN_AIR_S = 0.02  # gait: a touchdown counts after at least this long in the air
 LEGGED_KEYS = ("heading", "target_speed", "torque_limit", "joint_speed_limit", "kp", "kd", "armature",
                "torque_cost_weight", "joint_speed_cost_weight", "action_rate_cost_weight", "foot_slip_cost_weight",
                "base_height_cost_weight", "base_height_target", "orientation_cost_weight", "body_contact_cost_weight",
-               "feet_air_time_weight", "feet_air_time_target", "foot_geoms", "only_positive_rewards")
+               "feet_air_time_weight", "feet_air_time_target", "foot_geoms", "only_positive_rewards",
+               "terminate_on_contact")
 TERRAIN_STEP_KEYS = ("step_height", "step_height_range", "step_distance")
 
 
@@ -155,6 +159,7 @@ class LocomotionEnv(AntEnv):
         self._heading_is_x = angle == 0.0
         self._set_up_actuators(legged)
         self._set_up_contacts(legged.get("foot_geoms") or [])
+        self._set_up_contact_termination(legged.get("terminate_on_contact") or [])
         self._set_up_terrain(terrain, evaluation)
         self._w = {k: float(legged.get(k) or 0.0) for k in LEGGED_KEYS if k.endswith("_weight")}
         self._target_speed = legged.get("target_speed")
@@ -270,6 +275,24 @@ class LocomotionEnv(AntEnv):
         self._foot_index = np.full(model.ngeom, -1, np.int64)
         self._foot_index[self.feet] = np.arange(len(self.feet))
 
+    def _set_up_contact_termination(self, names) -> None:
+        model = self.model
+        missing = [n for n in names if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, n) < 0]
+        if missing:
+            raise ConfigError(f"env.locomotion.terminate_on_contact: {', '.join(missing)} is not a body of the model")
+        self._ending_geom = np.zeros(model.ngeom, bool)  # geoms whose touching the ground or the step ends an episode
+        for name in names:
+            self._ending_geom[model.geom_bodyid == model.body(name).id] = True
+        self._ending_geom &= self._kind != 1
+
+    def touches_ground(self) -> bool:
+        """A geom of a terminate_on_contact body touches the ground or the step."""
+        pairs = self.data.contact.geom
+        if len(pairs) == 0 or not self._ending_geom.any():
+            return False
+        ground = self._kind[pairs] == 1
+        return bool((ground[:, 0] & self._ending_geom[pairs[:, 1]] | ground[:, 1] & self._ending_geom[pairs[:, 0]]).any())
+
     def _set_up_terrain(self, terrain: dict, evaluation: bool) -> None:
         model = self.model
         self.observe_contacts = bool(terrain.get("observe_contacts", False))
@@ -313,6 +336,8 @@ class LocomotionEnv(AntEnv):
         self.level = self._height_range[0] if self._height_range else self.step_height  # curriculum: the range's top now
         self._level_step = float(terrain.get("curriculum_step") or 0.02)
         self._threshold = float(terrain.get("curriculum_threshold") or 0.8)
+        band = terrain.get("curriculum_band")
+        self._band = None if band is None else float(band)
         down = terrain.get("curriculum_down_threshold")
         self._down_threshold = None if down is None else float(down)
         self.outcomes = deque(maxlen=int(terrain.get("curriculum_window") or 20))
@@ -361,7 +386,10 @@ class LocomotionEnv(AntEnv):
             height = self._fixed_height
         elif self._height_range is not None:
             low, high = self._height_range
-            height = float(rng.uniform(low, self.level if self._curriculum else high))
+            if self._curriculum:
+                low = low if self._band is None else max(low, self.level - self._band)
+                high = self.level
+            height = float(rng.uniform(low, high))
         else:
             height = self.model_step[0]
         distance = float(rng.uniform(*self._distance_range)) if self._distance_range else self.model_step[1]
@@ -440,7 +468,7 @@ class LocomotionEnv(AntEnv):
         reward = reward + extra_reward if extra_info else reward
         if self._positive_only:  # legged_gym's only_positive_rewards: costs never make an early fall pay
             reward = max(reward, 0.0)
-        terminated = (not self.is_healthy) and self._terminate_when_unhealthy
+        terminated = ((not self.is_healthy) and self._terminate_when_unhealthy) or self.touches_ground()
         info = {"x_position": self.data.qpos[0], "y_position": self.data.qpos[1],
                 "distance_from_origin": np.linalg.norm(self.data.qpos[0:2], ord=2),
                 "x_velocity": x_velocity, "y_velocity": y_velocity, "forward_velocity": speed,

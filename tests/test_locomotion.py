@@ -145,6 +145,36 @@ def test_the_curriculum_steps_down_when_success_falls_to_the_down_threshold():
     assert loco.level >= 0.0 and 0.0 <= loco.step_height <= loco.level + 1e-12
 
 
+def test_a_curriculum_band_draws_heights_just_under_the_level():
+    env = env_of("env=quadruped_step", "env.terrain.curriculum_band=0.03")
+    loco = env.unwrapped
+    loco.level = 0.1
+    heights = []
+    for seed in range(30):
+        env.reset(seed=seed)
+        heights.append(loco.step_height)
+    assert min(heights) >= 0.07 - 1e-12 and max(heights) <= 0.1 + 1e-12 and max(heights) - min(heights) > 0.01
+    loco.level = 0.02  # the band stops at the range's min (0)
+    env.reset(seed=0)
+    assert 0.0 <= loco.step_height <= 0.02
+
+
+def test_terminate_on_contact_ends_the_episode_when_the_trunk_touches_down():
+    def trunk_on_the_ground(*overrides):
+        env = env_of("env=quadruped", "env.locomotion.healthy_z_range=[0.0,2.0]", *overrides)
+        loco = env.unwrapped
+        env.reset(seed=0)
+        loco.data.qpos[2:7] = [0.07, 0.0, 1.0, 0.0, 0.0]  # on its back, legs up: the trunk's box (7 cm half height) lies on the floor
+        mujoco.mj_forward(loco.model, loco.data)
+        return env.step(np.zeros(12, np.float32))[2]
+
+    assert trunk_on_the_ground("env.locomotion.terminate_on_contact=[trunk]")
+    assert not trunk_on_the_ground()  # off by default: only healthy_z_range ends an episode
+    env = env_of("env=quadruped", "env.locomotion.terminate_on_contact=[trunk]")
+    env.reset(seed=0)
+    assert not any(env.step(np.zeros(12, np.float32))[2] for _ in range(5))  # standing: the feet touch, not the trunk
+
+
 def test_the_curriculum_and_the_step_travel_with_the_env_state():
     env = env_of("env=quadruped_step", "env.terrain.curriculum_window=1", "env.terrain.curriculum_threshold=1")
     env.reset(seed=0)
@@ -260,6 +290,8 @@ def test_the_a1like_quadruped_faces_minus_x_stands_and_gets_a_tracking_camera():
     (["env.terrain.height_samples=-1"], "height_samples=-1 must be >= 0"),
     (["env.terrain.step_height=2"], "taller than the model's step box is deep"),
     (["env.locomotion.heading=north"], "env.locomotion.heading=north is not known"),
+    (["env.terrain.curriculum_band=0"], "curriculum_band=0.0 must be > 0"),
+    (["env.locomotion.terminate_on_contact=[torso]"], "terminate_on_contact: torso is not a body of the model"),
     (["env.locomotion.joint_speed_limit=0"], "joint_speed_limit=0.0 must be > 0"),
     (["env.locomotion.torque_cost_weight=-1"], "torque_cost_weight=-1.0 must be >= 0"),
 ])
