@@ -37,7 +37,7 @@ def test_env_files_carry_their_tuned_values():
     cheetah = compose_config(["env=HalfCheetah-v4"])
     assert (cheetah.policy.log_std_init, cheetah.policy.width, cheetah.policy.activation) == (-2.0, 256, "relu")
     assert (cheetah.collector.frames_per_batch, cheetah.loss.epochs, cheetah.optim.anneal_lr) == (512, 20, False)
-    for env, log_std, gamma in (("Ant-v4", -0.7, 0.99), ("Humanoid-v4", -0.7, 0.99), ("Walker2d-v4", 0.0, 0.995)):
+    for env, log_std, gamma in (("Ant-v4", -0.7, 0.99), ("Humanoid-v4", -1.0, 0.99), ("Walker2d-v4", 0.0, 0.995)):
         cfg = compose_config([f"env={env}"])  # 8 envs x 256 steps, value loss 0.25
         assert (cfg.collector.num_envs, cfg.collector.frames_per_batch, cfg.loss.critic_coef) == (8, 2048, 0.25)
         assert (cfg.policy.log_std_init, cfg.optim.lr, cfg.advantage.gamma) == (log_std, 3e-4, gamma)
