@@ -175,6 +175,17 @@ def test_terminate_on_contact_ends_the_episode_when_the_trunk_touches_down():
     assert not any(env.step(np.zeros(12, np.float32))[2] for _ in range(5))  # standing: the feet touch, not the trunk
 
 
+def test_the_climb_preset_composes_to_the_recipe_and_builds_its_env():
+    cfg = compose_config(["experiment=quadruped_climb"])
+    loco, terrain = cfg.env.locomotion, cfg.env.terrain
+    assert (loco.target_speed, list(loco.terminate_on_contact), terrain.curriculum_band, terrain.height_samples,
+            cfg.optim.lr) == (0.6, ["trunk"], 0.04, 20, 1e-4)
+    env, blind = make_gym_env(cfg.env), env_of("env=quadruped_step")
+    env.reset(seed=0)
+    assert env.observation_space.shape[0] == blind.observation_space.shape[0] + 4 + 20  # 4 feet, 20 heights
+    assert 1.0 <= env.unwrapped.step_edge <= 2.0
+
+
 def test_the_curriculum_and_the_step_travel_with_the_env_state():
     env = env_of("env=quadruped_step", "env.terrain.curriculum_window=1", "env.terrain.curriculum_threshold=1")
     env.reset(seed=0)
