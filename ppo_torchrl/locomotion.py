@@ -23,11 +23,11 @@ configured (so a config without these keys steps exactly as Ant-v5 does):
 - **Terrain** (`env.terrain.*`, models with a body named `step` holding one box geom): the step's
   height and distance drawn per episode, from a range that a success-driven curriculum widens (or,
   with `curriculum_band`, a band just under the curriculum's level that it raises).
-- **Termination on contact** (`terminate_on_contact`, legged_gym's): the episode also ends when a
-  listed body (e.g. the trunk) touches the ground or the step.
   The step is moved by `model.body_pos` at reset (no recompile; moving a geom of the world body
   instead leaves MuJoCo's collision bounding volumes stale). Its box reaches below the floor, so any
   height from 0 to the box's depth is a solid step.
+- **Termination on contact** (`terminate_on_contact`, legged_gym's): the episode also ends when a
+  listed body (e.g. the trunk) touches the ground or the step.
 - **Observation extras** (opt-in, the policy is blind by default): one 0/1 ground-contact flag per foot;
   terrain heights at points ahead of the main body, computed from the known step geometry
   (the step's top where the point lies beyond its edge, else 0: the floor is at z = 0).
@@ -284,14 +284,11 @@ class LocomotionEnv(AntEnv):
         for name in names:
             self._ending_geom[model.geom_bodyid == model.body(name).id] = True
         self._ending_geom &= self._kind != 1
+        self._ends_on_contact = bool(self._ending_geom.any())
 
     def touches_ground(self) -> bool:
         """A geom of a terminate_on_contact body touches the ground or the step."""
-        pairs = self.data.contact.geom
-        if len(pairs) == 0 or not self._ending_geom.any():
-            return False
-        ground = self._kind[pairs] == 1
-        return bool((ground[:, 0] & self._ending_geom[pairs[:, 1]] | ground[:, 1] & self._ending_geom[pairs[:, 0]]).any())
+        return self._ends_on_contact and bool(self._ending_geom[self._ground_partners()].any())
 
     def _set_up_terrain(self, terrain: dict, evaluation: bool) -> None:
         model = self.model
@@ -440,15 +437,20 @@ class LocomotionEnv(AntEnv):
             self.gait.add(feet, speed, body > 0, model.opt.timestep)
         mujoco.mj_rnePostConstraint(model, data)
 
+    def _ground_partners(self) -> np.ndarray:
+        """The geoms in contact with the ground or the step (one entry per contact)."""
+        pairs = self.data.contact.geom
+        if len(pairs) == 0:
+            return np.zeros(0, np.int64)
+        ground = self._kind[pairs] == 1
+        return np.where(ground[:, 0], pairs[:, 1], pairs[:, 0])[ground.any(axis=1)]
+
     def _contacts(self) -> tuple:
         """(a ground-contact flag per foot, the number of geoms of non-foot bodies touching the ground)."""
-        pairs = self.data.contact.geom
         feet = np.zeros(len(self.feet), bool)
-        if len(pairs) == 0:
+        partner = self._ground_partners()
+        if len(partner) == 0:
             return feet, 0
-        kind = self._kind[pairs]
-        ground = kind == 1
-        partner = np.where(ground[:, 0], pairs[:, 1], pairs[:, 0])[ground.any(axis=1)]
         partner_kind = self._kind[partner]
         feet[self._foot_index[partner[partner_kind == 2]]] = True
         return feet, len(np.unique(partner[partner_kind == 3]))
