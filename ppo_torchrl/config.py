@@ -110,6 +110,9 @@ class TerrainConfig:
     # m: with a curriculum, draw each height from [level - band, level] (not below min) rather than
     # from [min, level], so training stays at the hard end; null: the whole of [min, level].
     curriculum_band: Optional[float] = None
+    # With a band: the share of episodes drawn from the band; the others come from the whole of
+    # [min, level], so low steps and flat ground are not forgotten. 1: the band only.
+    curriculum_band_share: float = 1.0
     step_distance: Optional[List[float]] = None  # [min, max] m from main_body's start to the edge, drawn per episode
     success_margin: float = 0.5  # m: an episode succeeds when main_body ends this far beyond the edge
     # Evaluation envs (periodic eval, evaluate): this fixed height unless step_height is set; null:

@@ -22,7 +22,8 @@ configured (so a config without these keys steps exactly as Ant-v5 does):
   does not pay.
 - **Terrain** (`env.terrain.*`, models with a body named `step` holding one box geom): the step's
   height and distance drawn per episode, from a range that a success-driven curriculum widens (or,
-  with `curriculum_band`, a band just under the curriculum's level that it raises).
+  with `curriculum_band`, a band just under the curriculum's level that it raises, for a
+  `curriculum_band_share` of the episodes).
   The step is moved by `model.body_pos` at reset (no recompile; moving a geom of the world body
   instead leaves MuJoCo's collision bounding volumes stale). Its box reaches below the floor, so any
   height from 0 to the box's depth is a solid step.
@@ -312,10 +313,17 @@ class LocomotionEnv(AntEnv):
         g = geoms[0]
         self._half = model.geom_size[g].copy()  # the box's half sizes
         self._box_offset = model.geom_pos[g].copy()
-        self._start_x = float(self.data.xpos[self._body_id][0])
+        # Distances run along the heading: the step's edge, the success line and the height samples
+        # are coordinates on that ground axis (world x for heading x).
+        self._start_x = self._along(self.data.xpos[self._body_id])
         self._step_pos0 = model.body_pos[self._step_id].copy()
         self.step_height, self.step_edge = self._read_step()
         self.model_step = (self.step_height, self.step_edge - self._start_x)  # as the model file has it
+        # The step box turned so that its own x runs along the heading (its extent to the side stays
+        # what the file gives, 100 m in quadruped_step.xml), and moved along the heading from then on.
+        half_angle = 0.5 * math.atan2(self.heading[1], self.heading[0])
+        model.body_quat[self._step_id] = [math.cos(half_angle), 0.0, 0.0, math.sin(half_angle)]
+        self._side = np.array([-self.heading[1], self.heading[0]])
         fixed = terrain.get("step_height")
         if evaluation and fixed is None:
             fixed = terrain.get("eval_step_height")
@@ -335,6 +343,8 @@ class LocomotionEnv(AntEnv):
         self._threshold = float(terrain.get("curriculum_threshold") or 0.8)
         band = terrain.get("curriculum_band")
         self._band = None if band is None else float(band)
+        share = terrain.get("curriculum_band_share")
+        self._band_share = 1.0 if share is None else float(share)
         down = terrain.get("curriculum_down_threshold")
         self._down_threshold = None if down is None else float(down)
         self.outcomes = deque(maxlen=int(terrain.get("curriculum_window") or 20))
@@ -344,14 +354,22 @@ class LocomotionEnv(AntEnv):
         if top > depth:
             raise ConfigError(f"env.terrain: a step of {top} m is taller than the model's step box is deep ({depth} m)")
 
+    def _along(self, xyz) -> float:
+        """A world position's coordinate along the heading (x for heading x)."""
+        return float(xyz[0] * self.heading[0] + xyz[1] * self.heading[1])
+
     def _read_step(self) -> tuple:
+        """The model file's step (a box with its axes along the world's): its top and near edge along the heading."""
         pos = self.model.body_pos[self._step_id] + self._box_offset
-        return float(pos[2] + self._half[2]), float(pos[0] - self._half[0])
+        reach = abs(self.heading[0]) * self._half[0] + abs(self.heading[1]) * self._half[1]
+        return float(pos[2] + self._half[2]), self._along(pos) - float(reach)
 
     def _place_step(self, height: float, distance: float) -> None:
         edge = self._start_x + distance
-        self.model.body_pos[self._step_id] = [edge + self._half[0] - self._box_offset[0], self._step_pos0[1],
-                                              height - self._half[2] - self._box_offset[2]]
+        # the box's own x is the heading (body_quat), so its offset in the body moves the box along it
+        along = edge + self._half[0] - self._box_offset[0]
+        xy = along * self.heading + (self._side @ self._step_pos0[:2]) * self._side
+        self.model.body_pos[self._step_id] = [xy[0], xy[1], height - self._half[2] - self._box_offset[2]]
         self.step_height, self.step_edge = height, edge
 
     # -- episodes ------------------------------------------------------------------------------------
@@ -384,7 +402,9 @@ class LocomotionEnv(AntEnv):
         elif self._height_range is not None:
             low, high = self._height_range
             if self._curriculum:
-                low = low if self._band is None else max(low, self.level - self._band)
+                # (share 1 draws nothing extra, so runs without the knob keep their random stream)
+                if self._band is not None and (self._band_share >= 1 or rng.uniform() < self._band_share):
+                    low = max(low, self.level - self._band)
                 high = self.level
             height = float(rng.uniform(low, high))
         else:
@@ -416,10 +436,10 @@ class LocomotionEnv(AntEnv):
 
     def crossed(self) -> bool:
         """Success on a step env: the main body is success_margin beyond the step's edge."""
-        return bool(self.data.xpos[self._body_id][0] >= self.step_edge + self.success_margin)
+        return self._along(self.data.xpos[self._body_id]) >= self.step_edge + self.success_margin
 
     def terrain_height(self, x: np.ndarray) -> np.ndarray:
-        """Ground height at world x (the step's top beyond its edge, else the floor at 0)."""
+        """Ground height at coordinate x along the heading (the step's top beyond its edge, else the floor at 0)."""
         if not self.has_step:
             return np.zeros_like(x)
         return np.where(x >= self.step_edge, self.step_height, 0.0)
@@ -496,7 +516,7 @@ class LocomotionEnv(AntEnv):
         self._prev_action = np.asarray(action, dtype=np.float64).copy()
         body = data.xpos[self._body_id]
         if w["base_height_cost_weight"]:
-            height = body[2] - float(self.terrain_height(np.array(body[0])))
+            height = body[2] - float(self.terrain_height(np.array(self._along(body))))
             terms["reward_base_height"] = -w["base_height_cost_weight"] * (height - self._height_target) ** 2
         if w["orientation_cost_weight"]:
             up = data.xmat[self._body_id].reshape(3, 3)[2] @ self._up0  # cos(tilt from the initial attitude)
@@ -525,7 +545,7 @@ class LocomotionEnv(AntEnv):
             extras.append(self._contacts()[0].astype(np.float64))
         if self.height_samples:
             body = self.data.xpos[self._body_id]
-            ahead = body[0] + self._sample_spacing * np.arange(self.height_samples)
+            ahead = self._along(body) + self._sample_spacing * np.arange(self.height_samples)
             extras.append(self.terrain_height(ahead))
         return np.concatenate([observation, *extras]) if extras else observation
 

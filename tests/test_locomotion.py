@@ -157,6 +157,33 @@ def test_a_curriculum_band_draws_heights_just_under_the_level():
     loco.level = 0.02  # the band stops at the range's min (0)
     env.reset(seed=0)
     assert 0.0 <= loco.step_height <= 0.02
+    mixed = env_of("env=quadruped_step", "env.terrain.curriculum_band=0.03", "env.terrain.curriculum_band_share=0.5")
+    mixed.unwrapped.level = 0.1
+    heights = []
+    for seed in range(60):
+        mixed.reset(seed=seed)
+        heights.append(mixed.unwrapped.step_height)
+    below = np.mean(np.array(heights) < 0.07)  # from [0, 0.1] outside the band: 0.5 * 0.7 of them, ~0.35
+    assert 0.15 < below < 0.6 and max(heights) <= 0.1 + 1e-12
+
+
+def test_the_step_lies_along_the_heading_of_a_robot_built_facing_minus_x():
+    env = env_of("env=quadruped_a1like_step", "env.terrain.step_height=0.15", "env.terrain.step_distance=[2.0,2.0]",
+                 "env.terrain.height_samples=30")
+    loco = env.unwrapped
+    env.reset(seed=0)
+    mujoco.mj_forward(loco.model, loco.data)
+    box = next(g for g in range(loco.model.ngeom) if loco.model.geom_bodyid[g] == loco._step_id)
+    near_x = loco.data.geom_xpos[box][0] + loco.model.geom_size[box][0]  # the box's face towards +x
+    assert list(loco.heading) == pytest.approx([-1.0, 0.0]) and loco.step_edge == pytest.approx(2.0)
+    assert near_x == pytest.approx(-2.0)  # 2 m ahead of the trunk's start (x = 0), along -x
+    assert loco.data.geom_xpos[box][2] + loco.model.geom_size[box][2] == pytest.approx(0.15)
+    heights = env.unwrapped._get_obs()[-30:]  # 10 cm apart from under the trunk: 0 up to 2 m, then 15 cm
+    assert (heights[:20] == 0).all() and heights[20:] == pytest.approx(0.15)
+    assert not loco.crossed()
+    loco.data.qpos[0] -= 2.6  # 60 cm past the edge, nose first
+    mujoco.mj_kinematics(loco.model, loco.data)
+    assert loco.crossed()
 
 
 def test_terminate_on_contact_ends_the_episode_when_the_trunk_touches_down():
@@ -302,6 +329,7 @@ def test_the_a1like_quadruped_faces_minus_x_stands_and_gets_a_tracking_camera():
     (["env.terrain.step_height=2"], "taller than the model's step box is deep"),
     (["env.locomotion.heading=north"], "env.locomotion.heading=north is not known"),
     (["env.terrain.curriculum_band=0"], "curriculum_band=0.0 must be > 0"),
+    (["env.terrain.curriculum_band_share=1.5"], "curriculum_band_share=1.5 must be in [0, 1]"),
     (["env.locomotion.terminate_on_contact=[torso]"], "terminate_on_contact: torso is not a body of the model"),
     (["env.locomotion.joint_speed_limit=0"], "joint_speed_limit=0.0 must be > 0"),
     (["env.locomotion.torque_cost_weight=-1"], "torque_cost_weight=-1.0 must be >= 0"),
