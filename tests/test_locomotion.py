@@ -205,8 +205,8 @@ def test_terminate_on_contact_ends_the_episode_when_the_trunk_touches_down():
 def test_the_climb_preset_composes_to_the_recipe_and_builds_its_env():
     cfg = compose_config(["experiment=quadruped_climb"])
     loco, terrain = cfg.env.locomotion, cfg.env.terrain
-    assert (loco.target_speed, list(loco.terminate_on_contact), terrain.curriculum_band, terrain.height_samples,
-            cfg.optim.lr) == (0.6, ["trunk"], 0.04, 20, 1e-4)
+    assert (loco.target_speed, list(loco.terminate_on_contact), terrain.curriculum_band, terrain.curriculum_band_share,
+            terrain.height_samples, cfg.optim.lr) == (0.6, ["trunk"], 0.04, 0.7, 20, 1e-4)
     env, blind = make_gym_env(cfg.env), env_of("env=quadruped_step")
     env.reset(seed=0)
     assert env.observation_space.shape[0] == blind.observation_space.shape[0] + 4 + 20  # 4 feet, 20 heights
