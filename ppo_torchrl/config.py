@@ -133,7 +133,8 @@ class EnvConfig:
     max_episode_steps: Optional[int] = None  # None: the id's registered time limit
     make_kwargs: Dict[str, Any] = field(default_factory=dict)  # extra gymnasium.make kwargs
     # env=mjcf: the robot's MJCF file, run as a locomotion env (Gymnasium's Ant-v5 class). A path, or
-    # the name of a model shipped in ppo_torchrl/assets (quadruped.xml, quadruped_step.xml, quadruped_a1like.xml).
+    # the name of a model shipped in ppo_torchrl/assets (quadruped.xml, quadruped_step.xml, quadruped_a1like.xml,
+    # quadruped_a1like_step.xml).
     xml_file: Optional[str] = None
     locomotion: LocomotionConfig = field(default_factory=LocomotionConfig)
     terrain: TerrainConfig = field(default_factory=TerrainConfig)
