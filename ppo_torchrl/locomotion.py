@@ -26,7 +26,9 @@ configured (so a config without these keys steps exactly as Ant-v5 does):
   `curriculum_band_share` of the episodes).
   The step is moved by `model.body_pos` at reset (no recompile; moving a geom of the world body
   instead leaves MuJoCo's collision bounding volumes stale). Its box reaches below the floor, so any
-  height from 0 to the box's depth is a solid step.
+  height from 0 to the box's depth is a solid step. Distances (the edge, the success line, the height
+  samples) run along the heading, and the box is turned to face it, so a robot built facing -x or +y
+  meets the step ahead of it.
 - **Termination on contact** (`terminate_on_contact`, legged_gym's): the episode also ends when a
   listed body (e.g. the trunk) touches the ground or the step.
 - **Observation extras** (opt-in, the policy is blind by default): one 0/1 ground-contact flag per foot;
@@ -315,10 +317,10 @@ class LocomotionEnv(AntEnv):
         self._box_offset = model.geom_pos[g].copy()
         # Distances run along the heading: the step's edge, the success line and the height samples
         # are coordinates on that ground axis (world x for heading x).
-        self._start_x = self._along(self.data.xpos[self._body_id])
+        self._start_along = self._along(self.data.xpos[self._body_id])
         self._step_pos0 = model.body_pos[self._step_id].copy()
         self.step_height, self.step_edge = self._read_step()
-        self.model_step = (self.step_height, self.step_edge - self._start_x)  # as the model file has it
+        self.model_step = (self.step_height, self.step_edge - self._start_along)  # as the model file has it
         # The step box turned so that its own x runs along the heading (its extent to the side stays
         # what the file gives, 100 m in quadruped_step.xml), and moved along the heading from then on.
         half_angle = 0.5 * math.atan2(self.heading[1], self.heading[0])
@@ -365,7 +367,7 @@ class LocomotionEnv(AntEnv):
         return float(pos[2] + self._half[2]), self._along(pos) - float(reach)
 
     def _place_step(self, height: float, distance: float) -> None:
-        edge = self._start_x + distance
+        edge = self._start_along + distance
         # the box's own x is the heading (body_quat), so its offset in the body moves the box along it
         along = edge + self._half[0] - self._box_offset[0]
         xy = along * self.heading + (self._side @ self._step_pos0[:2]) * self._side
@@ -568,7 +570,7 @@ class LocomotionEnv(AntEnv):
         self._prev_contact, self._stepped = state["prev_contact"].copy(), state["stepped"]
         self._prev_feet_xy = None if state["prev_feet_xy"] is None else state["prev_feet_xy"].copy()
         if self.has_step and "step_height" in state:
-            self._place_step(state["step_height"], state["step_edge"] - self._start_x)
+            self._place_step(state["step_height"], state["step_edge"] - self._start_along)
             self.level = state["level"]
             self.outcomes.clear()
             self.outcomes.extend(state["outcomes"])
