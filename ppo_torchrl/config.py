@@ -69,6 +69,9 @@ class LocomotionConfig:
     # Legged-locomotion reward terms (legged_gym's set), per control step, each times its weight (0: off):
     torque_cost_weight: float = 0.0  # - w x sum of actuator torque^2 (N^2 m^2)
     joint_speed_cost_weight: float = 0.0  # - w x sum of actuated joint speed^2 ((rad/s)^2)
+    # - w x sum over actuated joints of how far (rad/s) each went past joint_speed_limit at its fastest
+    # physics step of the control step (legged_gym's dof_vel_limits; impacts, not the drive, do that)
+    joint_speed_limit_cost_weight: float = 0.0
     action_rate_cost_weight: float = 0.0  # - w x sum of (action - previous action)^2
     foot_slip_cost_weight: float = 0.0  # - w x sum over feet on the ground of their horizontal speed^2 ((m/s)^2)
     base_height_cost_weight: float = 0.0  # - w x (main_body's height above the terrain - base_height_target)^2

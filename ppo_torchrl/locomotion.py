@@ -16,8 +16,9 @@ configured (so a config without these keys steps exactly as Ant-v5 does):
   model's own joint damping adds margin). Outside forces (a fall, an impact) can still push a joint
   past the limit, which eval's peak joint speed would show.
 - **Reward terms** of legged-locomotion practice (legged_gym's set, weights per control step):
-  joint torque, joint speed, action rate, foot slip, base height and orientation, feet air time,
-  non-foot contacts; `target_speed` caps the rewarded forward speed; `only_positive_rewards` floors
+  joint torque, joint speed, joint speed past the limit (the largest excess of each joint over the
+  control step's physics steps, so the impacts that eval's peak joint speed sees are paid for), action
+  rate, foot slip, base height and orientation, feet air time, non-foot contacts; `target_speed` caps the rewarded forward speed; `only_positive_rewards` floors
   each step's reward at 0, as legged_gym does, so that while the costs outweigh the rest an early fall
   does not pay.
 - **Terrain** (`env.terrain.*`, models with a body named `step` holding one box geom): the step's
@@ -63,7 +64,7 @@ MIN_AIR_S = 0.02  # gait: a touchdown counts after at least this long in the air
 
 # Keys of env.locomotion that LocomotionEnv takes (the others are Ant-v5's own arguments).
 LEGGED_KEYS = ("heading", "target_speed", "torque_limit", "joint_speed_limit", "kp", "kd", "armature",
-               "torque_cost_weight", "joint_speed_cost_weight", "action_rate_cost_weight", "foot_slip_cost_weight",
+               "torque_cost_weight", "joint_speed_cost_weight", "joint_speed_limit_cost_weight", "action_rate_cost_weight", "foot_slip_cost_weight",
                "base_height_cost_weight", "base_height_target", "orientation_cost_weight", "body_contact_cost_weight",
                "feet_air_time_weight", "feet_air_time_target", "foot_geoms", "only_positive_rewards",
                "terminate_on_contact")
@@ -165,6 +166,10 @@ class LocomotionEnv(AntEnv):
         self._set_up_contact_termination(legged.get("terminate_on_contact") or [])
         self._set_up_terrain(terrain, evaluation)
         self._w = {k: float(legged.get(k) or 0.0) for k in LEGGED_KEYS if k.endswith("_weight")}
+        if self._w["joint_speed_limit_cost_weight"] and legged.get("joint_speed_limit") is None:
+            raise ConfigError("env.locomotion.joint_speed_limit_cost_weight needs env.locomotion.joint_speed_limit")
+        self._speed_limit = legged.get("joint_speed_limit")
+        self._step_peak = np.zeros(len(self._act_dofs))  # each actuated joint's top |speed| in the last control step
         self._target_speed = legged.get("target_speed")
         self._positive_only = bool(legged.get("only_positive_rewards"))
         self._air_target = float(legged.get("feet_air_time_target", 0.5))
@@ -448,15 +453,19 @@ class LocomotionEnv(AntEnv):
 
     # -- stepping ------------------------------------------------------------------------------------
     def _step_mujoco_simulation(self, ctrl, n_frames):
-        if not self.measure_gait:
+        if not (self.measure_gait or self._w["joint_speed_limit_cost_weight"]):
             return super()._step_mujoco_simulation(ctrl, n_frames)
         model, data = self.model, self.data
         data.ctrl[:] = ctrl
-        for _ in range(n_frames):  # eval: the gait sampled at every physics step
+        peak = np.zeros(len(self._act_dofs))
+        for _ in range(n_frames):  # joint speeds (and, in eval, the gait) sampled at every physics step
             mujoco.mj_step(model, data)
-            feet, body = self._contacts()
-            speed = float(np.abs(data.qvel[self._act_dofs]).max()) if len(self._act_dofs) else 0.0
-            self.gait.add(feet, speed, body > 0, model.opt.timestep)
+            speeds = np.abs(data.qvel[self._act_dofs])
+            np.maximum(peak, speeds, out=peak)
+            if self.measure_gait:
+                feet, body = self._contacts()
+                self.gait.add(feet, float(speeds.max()) if len(speeds) else 0.0, body > 0, model.opt.timestep)
+        self._step_peak = peak
         mujoco.mj_rnePostConstraint(model, data)
 
     def _ground_partners(self) -> np.ndarray:
@@ -513,6 +522,9 @@ class LocomotionEnv(AntEnv):
             terms["reward_torque"] = -w["torque_cost_weight"] * float(np.square(data.actuator_force).sum())
         if w["joint_speed_cost_weight"]:
             terms["reward_joint_speed"] = -w["joint_speed_cost_weight"] * float(np.square(data.qvel[self._act_dofs]).sum())
+        if w["joint_speed_limit_cost_weight"]:
+            excess = np.maximum(self._step_peak - self._speed_limit, 0.0)
+            terms["reward_joint_speed_limit"] = -w["joint_speed_limit_cost_weight"] * float(excess.sum())
         if w["action_rate_cost_weight"]:
             terms["reward_action_rate"] = -w["action_rate_cost_weight"] * float(np.square(action - self._prev_action).sum())
         self._prev_action = np.asarray(action, dtype=np.float64).copy()

@@ -1,6 +1,7 @@
 """Issue 18: the locomotion env (locomotion.py): actuation limits, reward terms, terrain and its
 curriculum, observation extras, heading, tracking camera, and evaluation across step heights."""
 
+import copy
 import csv
 import json
 from pathlib import Path
@@ -18,8 +19,9 @@ from conftest import TINY, compose_config
 from test_bad_input import refused
 
 GYM_ANT_XML = Path(gymnasium.__file__).parent / "envs" / "mujoco" / "assets" / "ant.xml"
-WEIGHTS = ["torque_cost_weight", "joint_speed_cost_weight", "action_rate_cost_weight", "foot_slip_cost_weight",
-           "base_height_cost_weight", "orientation_cost_weight", "body_contact_cost_weight", "feet_air_time_weight"]
+WEIGHTS = ["torque_cost_weight", "joint_speed_cost_weight", "joint_speed_limit_cost_weight", "action_rate_cost_weight",
+           "foot_slip_cost_weight", "base_height_cost_weight", "orientation_cost_weight", "body_contact_cost_weight",
+           "feet_air_time_weight"]
 # A base built facing -x (rotated half a turn about z), one leg with a motor.
 FACING_MINUS_X = """<mujoco><worldbody><geom name="floor" type="plane" size="20 20 0.1"/>
 <body name="base" pos="0 0 0.3" quat="0 0 0 1"><freejoint/><geom type="box" size="0.2 0.1 0.05"/>
@@ -93,6 +95,30 @@ def test_joint_speed_and_torque_limits_hold_in_a_random_rollout():
     # falls and impacts under random actions may push a joint a little past it (8.36 rad/s measured).
     assert peak() <= 8.0 * 1.1
     assert peak("env.locomotion.joint_speed_limit=null") > 8.0 * 2  # the same rollouts without the limit (39)
+
+
+def test_the_joint_speed_limit_term_pays_for_the_fastest_physics_step_past_the_limit():
+    def spun(weight):  # a joint spun to 20 rad/s, then one control step of 4 physics steps with no action
+        env = env_of("env=quadruped", f"env.locomotion.joint_speed_limit_cost_weight={weight}")
+        loco = env.unwrapped
+        env.reset(seed=0)
+        env.step(np.zeros(12, np.float32))
+        quiet = env.step(np.zeros(12, np.float32))[4]["reward_joint_speed_limit"]
+        loco.data.qvel[loco._act_dofs[2]] = 20.0
+        mujoco.mj_forward(loco.model, loco.data)
+        speeds = []  # the same control step, stepped by hand from the same state
+        data = copy.copy(loco.data)
+        for _ in range(loco.frame_skip):
+            mujoco.mj_step(loco.model, data)
+            speeds.append(np.abs(data.qvel[loco._act_dofs]))
+        info = env.step(np.zeros(12, np.float32))[4]
+        return quiet, info["reward_joint_speed_limit"], np.max(speeds, axis=0)
+
+    quiet, term, peak = spun(1.0)
+    assert quiet == 0.0  # standing still: no joint near 8 rad/s
+    assert peak.max() < 20.0 and peak[2] > 8.0  # the damping slows it within the step, not under the limit
+    assert term == pytest.approx(-np.maximum(peak - 8.0, 0.0).sum())
+    assert spun(2.0)[1] == pytest.approx(2 * term)
 
 
 def test_step_height_is_drawn_in_range_and_the_curriculum_widens_on_success():
@@ -333,6 +359,8 @@ def test_the_a1like_quadruped_faces_minus_x_stands_and_gets_a_tracking_camera():
     (["env.locomotion.terminate_on_contact=[torso]"], "terminate_on_contact: torso is not a body of the model"),
     (["env.locomotion.joint_speed_limit=0"], "joint_speed_limit=0.0 must be > 0"),
     (["env.locomotion.torque_cost_weight=-1"], "torque_cost_weight=-1.0 must be >= 0"),
+    (["env.locomotion.joint_speed_limit=null", "env.locomotion.joint_speed_limit_cost_weight=1"],
+     "joint_speed_limit_cost_weight needs env.locomotion.joint_speed_limit"),
 ])
 def test_bad_terrain_and_locomotion_values_are_one_error_line(args, expected, capsys, tmp_path):
     code, lines = refused(["env=quadruped_step", *args, f"hydra.run.dir={tmp_path / 'new'}"], capsys)
