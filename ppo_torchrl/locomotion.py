@@ -18,9 +18,9 @@ configured (so a config without these keys steps exactly as Ant-v5 does):
 - **Reward terms** of legged-locomotion practice (legged_gym's set, weights per control step):
   joint torque, joint speed, joint speed past the limit (the largest excess of each joint over the
   control step's physics steps, so the impacts that eval's peak joint speed sees are paid for), action
-  rate, foot slip, base height and orientation, feet air time, non-foot contacts; `target_speed` caps the rewarded forward speed; `only_positive_rewards` floors
-  each step's reward at 0, as legged_gym does, so that while the costs outweigh the rest an early fall
-  does not pay.
+  rate, foot slip, base height and orientation, feet air time, non-foot contacts; `target_speed` caps
+  the rewarded forward speed; `only_positive_rewards` floors each step's reward at 0, as legged_gym
+  does, so that while the costs outweigh the rest an early fall does not pay.
 - **Terrain** (`env.terrain.*`, models with a body named `step` holding one box geom): the step's
   height and distance drawn per episode, from a range that a success-driven curriculum widens (or,
   with `curriculum_band`, a band just under the curriculum's level that it raises, for a
@@ -64,10 +64,10 @@ MIN_AIR_S = 0.02  # gait: a touchdown counts after at least this long in the air
 
 # Keys of env.locomotion that LocomotionEnv takes (the others are Ant-v5's own arguments).
 LEGGED_KEYS = ("heading", "target_speed", "torque_limit", "joint_speed_limit", "kp", "kd", "armature",
-               "torque_cost_weight", "joint_speed_cost_weight", "joint_speed_limit_cost_weight", "action_rate_cost_weight", "foot_slip_cost_weight",
-               "base_height_cost_weight", "base_height_target", "orientation_cost_weight", "body_contact_cost_weight",
-               "feet_air_time_weight", "feet_air_time_target", "foot_geoms", "only_positive_rewards",
-               "terminate_on_contact")
+               "torque_cost_weight", "joint_speed_cost_weight", "joint_speed_limit_cost_weight",
+               "action_rate_cost_weight", "foot_slip_cost_weight", "base_height_cost_weight", "base_height_target",
+               "orientation_cost_weight", "body_contact_cost_weight", "feet_air_time_weight", "feet_air_time_target",
+               "foot_geoms", "only_positive_rewards", "terminate_on_contact")
 TERRAIN_STEP_KEYS = ("step_height", "step_height_range", "step_distance")
 
 

@@ -233,6 +233,7 @@ def test_the_climb_preset_composes_to_the_recipe_and_builds_its_env():
     loco, terrain = cfg.env.locomotion, cfg.env.terrain
     assert (loco.target_speed, list(loco.terminate_on_contact), terrain.curriculum_band, terrain.curriculum_band_share,
             terrain.height_samples, cfg.optim.lr) == (0.6, ["trunk"], 0.04, 0.7, 20, 1e-4)
+    assert (loco.joint_speed_limit_cost_weight, loco.feet_air_time_weight) == (1.0, 2.0)
     env, blind = make_gym_env(cfg.env), env_of("env=quadruped_step")
     env.reset(seed=0)
     assert env.observation_space.shape[0] == blind.observation_space.shape[0] + 4 + 20  # 4 feet, 20 heights
