@@ -44,6 +44,9 @@ class LocomotionConfig:
     forward_reward_weight: float = 1.0  # x velocity of main_body, m/s
     healthy_reward: float = 1.0  # per step while main_body's z is inside healthy_z_range
     healthy_z_range: List[float] = field(default_factory=lambda: [0.2, 1.0])
+    # Read healthy_z_range above the terrain under main_body (a step env: the step's top beyond its edge)
+    # instead of Ant-v5's world z, with which a fall line of 20 cm is 5 cm above a 15 cm step.
+    healthy_z_above_terrain: bool = False
     terminate_when_unhealthy: bool = True  # the episode ends when the robot falls
     ctrl_cost_weight: float = 0.5  # times sum(action^2)
     contact_cost_weight: float = 5e-4  # times sum(clipped external contact forces^2)

@@ -67,7 +67,7 @@ LEGGED_KEYS = ("heading", "target_speed", "torque_limit", "joint_speed_limit", "
                "torque_cost_weight", "joint_speed_cost_weight", "joint_speed_limit_cost_weight",
                "action_rate_cost_weight", "foot_slip_cost_weight", "base_height_cost_weight", "base_height_target",
                "orientation_cost_weight", "body_contact_cost_weight", "feet_air_time_weight", "feet_air_time_target",
-               "foot_geoms", "only_positive_rewards", "terminate_on_contact")
+               "foot_geoms", "only_positive_rewards", "terminate_on_contact", "healthy_z_above_terrain")
 TERRAIN_STEP_KEYS = ("step_height", "step_height_range", "step_distance")
 
 
@@ -172,6 +172,7 @@ class LocomotionEnv(AntEnv):
         self._step_peak = np.zeros(len(self._act_dofs))  # each actuated joint's top |speed| in the last control step
         self._target_speed = legged.get("target_speed")
         self._positive_only = bool(legged.get("only_positive_rewards"))
+        self._z_above_terrain = bool(legged.get("healthy_z_above_terrain"))
         self._air_target = float(legged.get("feet_air_time_target", 0.5))
         target = legged.get("base_height_target")
         self._height_target = self._init_z if target is None else float(target)
@@ -440,6 +441,16 @@ class LocomotionEnv(AntEnv):
         if not (self.has_step and self._curriculum):
             return {}
         return {"env/terrain_level": self.level, "env/terrain_success": float(np.mean(self.recent)) if self.recent else 0.0}
+
+    @property
+    def is_healthy(self) -> bool:
+        """Ant-v5's test on the root's z; with healthy_z_above_terrain, that z less the terrain's height under main_body."""
+        if not self._z_above_terrain:
+            return super().is_healthy
+        state = self.state_vector()
+        ground = float(self.terrain_height(np.array(self._along(self.data.xpos[self._body_id]))))
+        low, high = self._healthy_z_range
+        return bool(np.isfinite(state).all() and low <= state[2] - ground <= high)
 
     def crossed(self) -> bool:
         """Success on a step env: the main body is success_margin beyond the step's edge."""

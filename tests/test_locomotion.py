@@ -228,6 +228,25 @@ def test_terminate_on_contact_ends_the_episode_when_the_trunk_touches_down():
     assert not any(env.step(np.zeros(12, np.float32))[2] for _ in range(5))  # standing: the feet touch, not the trunk
 
 
+def test_healthy_z_above_terrain_reads_the_fall_line_from_the_step_top():
+    def healthy(z_above_terrain, beyond_edge, height_above_ground):
+        env = env_of("env=quadruped_step", "env.terrain.step_height=0.15", "env.locomotion.healthy_z_range=[0.2,1.0]",
+                     f"env.locomotion.healthy_z_above_terrain={z_above_terrain}")
+        loco = env.unwrapped
+        env.reset(seed=0)
+        along = loco.step_edge + (0.5 if beyond_edge else -0.5)
+        ground = 0.15 if beyond_edge else 0.0
+        loco.data.qpos[:3] = [along * loco.heading[0], along * loco.heading[1], ground + height_above_ground]
+        mujoco.mj_forward(loco.model, loco.data)
+        return loco.is_healthy
+
+    # 12 cm above the step's top is 27 cm above the floor: over the 20 cm line in world z, under it above the terrain
+    assert healthy(False, True, 0.12) and not healthy(True, True, 0.12)
+    assert healthy(True, True, 0.3)
+    for on in (False, True):  # before the edge the terrain is the floor: the two readings agree
+        assert healthy(on, False, 0.3) and not healthy(on, False, 0.12)
+
+
 def test_the_climb_preset_composes_to_the_recipe_and_builds_its_env():
     cfg = compose_config(["experiment=quadruped_climb"])
     loco, terrain = cfg.env.locomotion, cfg.env.terrain
