@@ -119,6 +119,10 @@ class TerrainConfig:
     # With a band: the share of episodes drawn from the band; the others come from the whole of
     # [min, level], so low steps and flat ground are not forgotten. 1: the band only.
     curriculum_band_share: float = 1.0
+    # The share of training episodes on flat ground (the step at 0 m), drawn before the range and the
+    # curriculum; they do not count towards the curriculum's success rate. 0: none (the range's own
+    # draws only). Without it a curriculum at 20 cm seldom shows the policy flat ground.
+    flat_share: float = 0.0
     step_distance: Optional[List[float]] = None  # [min, max] m from main_body's start to the edge, drawn per episode
     success_margin: float = 0.5  # m: an episode succeeds when main_body ends this far beyond the edge
     # Evaluation envs (periodic eval, evaluate): this fixed height unless step_height is set; null:

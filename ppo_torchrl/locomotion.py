@@ -24,7 +24,7 @@ configured (so a config without these keys steps exactly as Ant-v5 does):
 - **Terrain** (`env.terrain.*`, models with a body named `step` holding one box geom): the step's
   height and distance drawn per episode, from a range that a success-driven curriculum widens (or,
   with `curriculum_band`, a band just under the curriculum's level that it raises, for a
-  `curriculum_band_share` of the episodes).
+  `curriculum_band_share` of the episodes); `flat_share` of the training episodes on flat ground.
   The step is moved by `model.body_pos` at reset (no recompile; moving a geom of the world body
   instead leaves MuJoCo's collision bounding volumes stale). Its box reaches below the floor, so any
   height from 0 to the box's depth is a solid step. Distances (the edge, the success line, the height
@@ -353,6 +353,8 @@ class LocomotionEnv(AntEnv):
         self._band = None if band is None else float(band)
         share = terrain.get("curriculum_band_share")
         self._band_share = 1.0 if share is None else float(share)
+        self._flat_share = 0.0 if evaluation else float(terrain.get("flat_share") or 0.0)
+        self._flat_episode = False  # this episode's step was put at 0 by flat_share (not a curriculum outcome)
         down = terrain.get("curriculum_down_threshold")
         self._down_threshold = None if down is None else float(down)
         self.outcomes = deque(maxlen=int(terrain.get("curriculum_window") or 20))
@@ -390,7 +392,8 @@ class LocomotionEnv(AntEnv):
         self.gait.reset()
 
     def reset(self, *, seed=None, options=None):
-        if self.has_step and self._stepped and self._curriculum:  # judge the episode before the reset wipes it
+        # judge the episode before the reset wipes it (a flat_share episode says nothing of the level)
+        if self.has_step and self._stepped and self._curriculum and not self._flat_episode:
             self._record_outcome(self.crossed())
         self._stepped = False
         return super().reset(seed=seed, options=options)
@@ -405,8 +408,13 @@ class LocomotionEnv(AntEnv):
 
     def _draw_step(self) -> None:
         rng = self.np_random
+        # (share 0 draws nothing extra, so runs without the knob keep their random stream)
+        self._flat_episode = (self._fixed_height is None and self._height_range is not None
+                              and self._flat_share > 0 and rng.uniform() < self._flat_share)
         if self._fixed_height is not None:
             height = self._fixed_height
+        elif self._flat_episode:
+            height = 0.0
         elif self._height_range is not None:
             low, high = self._height_range
             if self._curriculum:
@@ -584,7 +592,7 @@ class LocomotionEnv(AntEnv):
                  "xpos": self.data.xpos.copy()}
         if self.has_step:
             state.update(step_height=self.step_height, step_edge=self.step_edge, level=self.level,
-                         outcomes=list(self.outcomes), recent=list(self.recent))
+                         flat_episode=self._flat_episode, outcomes=list(self.outcomes), recent=list(self.recent))
         return state
 
     def set_extra_state(self, state: dict) -> None:
@@ -594,7 +602,7 @@ class LocomotionEnv(AntEnv):
         self._prev_feet_xy = None if state["prev_feet_xy"] is None else state["prev_feet_xy"].copy()
         if self.has_step and "step_height" in state:
             self._place_step(state["step_height"], state["step_edge"] - self._start_along)
-            self.level = state["level"]
+            self.level, self._flat_episode = state["level"], state.get("flat_episode", False)
             self.outcomes.clear()
             self.outcomes.extend(state["outcomes"])
             self.recent.clear()

@@ -170,6 +170,7 @@ def terrain_checks(terrain) -> list:
          f"env.terrain.curriculum_band={terrain.get('curriculum_band')} must be > 0 (m) or null"),
         (0 <= terrain.curriculum_band_share <= 1,
          f"env.terrain.curriculum_band_share={terrain.curriculum_band_share} must be in [0, 1]: a share of episodes"),
+        (0 <= terrain.flat_share <= 1, f"env.terrain.flat_share={terrain.flat_share} must be in [0, 1]: a share of episodes"),
         (not terrain.curriculum or terrain.step_height_range is not None,
          "env.terrain.curriculum=true needs env.terrain.step_height_range=[min, max] to widen"),
         (terrain.success_margin >= 0, f"env.terrain.success_margin={terrain.success_margin} must be >= 0 (m)"),

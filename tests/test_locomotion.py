@@ -193,6 +193,29 @@ def test_a_curriculum_band_draws_heights_just_under_the_level():
     assert 0.15 < below < 0.6 and max(heights) <= 0.1 + 1e-12
 
 
+def test_flat_share_puts_episodes_on_flat_ground_that_the_curriculum_does_not_count():
+    def episodes(*overrides, n=40):
+        env = env_of("env=quadruped_step", "env.terrain.curriculum_band=0.03", *overrides)
+        loco = env.unwrapped
+        loco.level = 0.1
+        heights = []
+        for seed in range(n):
+            env.reset(seed=seed)  # judges the episode before it (standing still: a failure) for the curriculum
+            heights.append(loco.step_height)
+            env.step(np.zeros(12, np.float32))
+        env.reset(seed=n)
+        return np.array(heights), len(loco.recent)
+
+    plain, judged = episodes(n=15)
+    assert (plain >= 0.07 - 1e-12).all() and judged == 15
+    flat, judged = episodes("env.terrain.flat_share=0.5", n=15)
+    on_flat = flat == 0.0
+    assert 0 < on_flat.sum() < 15 and (flat[~on_flat] >= 0.07 - 1e-12).all()
+    assert judged == 15 - on_flat.sum()  # flat episodes say nothing of the level: the window skips them
+    many, _ = episodes("env.terrain.flat_share=0.5", n=60)
+    assert 0.3 < np.mean(many == 0.0) < 0.7
+
+
 def test_the_step_lies_along_the_heading_of_a_robot_built_facing_minus_x():
     env = env_of("env=quadruped_a1like_step", "env.terrain.step_height=0.15", "env.terrain.step_distance=[2.0,2.0]",
                  "env.terrain.height_samples=30")
@@ -376,6 +399,7 @@ def test_the_a1like_quadruped_faces_minus_x_stands_and_gets_a_tracking_camera():
     (["env.locomotion.heading=north"], "env.locomotion.heading=north is not known"),
     (["env.terrain.curriculum_band=0"], "curriculum_band=0.0 must be > 0"),
     (["env.terrain.curriculum_band_share=1.5"], "curriculum_band_share=1.5 must be in [0, 1]"),
+    (["env.terrain.flat_share=-0.1"], "flat_share=-0.1 must be in [0, 1]"),
     (["env.locomotion.terminate_on_contact=[torso]"], "terminate_on_contact: torso is not a body of the model"),
     (["env.locomotion.joint_speed_limit=0"], "joint_speed_limit=0.0 must be > 0"),
     (["env.locomotion.torque_cost_weight=-1"], "torque_cost_weight=-1.0 must be >= 0"),
