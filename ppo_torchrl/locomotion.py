@@ -134,6 +134,10 @@ class GaitMeter:
 class LocomotionEnv(AntEnv):
     """Ant-v5 over any MJCF model, plus heading, actuation limits, reward terms, terrain and gait (module doc)."""
 
+    # Within step, read once after the control step: the contacts (_read_contacts) and is_healthy.
+    _now = None
+    _healthy_now = None
+
     def __init__(self, xml_file: str, legged: Optional[dict] = None, terrain: Optional[dict] = None,
                  evaluation: bool = False, **ant_kwargs):
         legged, terrain = dict(legged or {}), dict(terrain or {})
@@ -178,6 +182,7 @@ class LocomotionEnv(AntEnv):
         self._height_target = self._init_z if target is None else float(target)
         self._needs_contacts = bool(self.observe_contacts or self._w["foot_slip_cost_weight"]
                                     or self._w["feet_air_time_weight"] or self._w["body_contact_cost_weight"])
+        self._dt = self.dt  # the control step (s), read from the model once
         self.measure_gait = False  # evaluate sets it: gait figures sampled every physics step
         self.gait = GaitMeter(len(self.feet))
         self._reset_episode_memory()
@@ -297,7 +302,10 @@ class LocomotionEnv(AntEnv):
 
     def touches_ground(self) -> bool:
         """A geom of a terminate_on_contact body touches the ground or the step."""
-        return self._ends_on_contact and bool(self._ending_geom[self._ground_partners()].any())
+        if not self._ends_on_contact:
+            return False
+        partners = self._now[0] if self._now is not None else self._ground_partners()
+        return bool(self._ending_geom[partners].any())
 
     def _set_up_terrain(self, terrain: dict, evaluation: bool) -> None:
         model = self.model
@@ -453,6 +461,8 @@ class LocomotionEnv(AntEnv):
     @property
     def is_healthy(self) -> bool:
         """Ant-v5's test on the root's z; with healthy_z_above_terrain, that z less the terrain's height under main_body."""
+        if self._healthy_now is not None:
+            return self._healthy_now
         if not self._z_above_terrain:
             return super().is_healthy
         state = self.state_vector()
@@ -495,21 +505,32 @@ class LocomotionEnv(AntEnv):
         ground = self._kind[pairs] == 1
         return np.where(ground[:, 0], pairs[:, 1], pairs[:, 0])[ground.any(axis=1)]
 
-    def _contacts(self) -> tuple:
-        """(a ground-contact flag per foot, the number of geoms of non-foot bodies touching the ground)."""
+    def _read_contacts(self) -> tuple:
+        """(the geoms touching the ground or the step, a ground-contact flag per foot, the number of
+        geoms of non-foot bodies among them), as the simulator stands now."""
         feet = np.zeros(len(self.feet), bool)
         partner = self._ground_partners()
         if len(partner) == 0:
-            return feet, 0
+            return partner, feet, 0
         partner_kind = self._kind[partner]
         feet[self._foot_index[partner[partner_kind == 2]]] = True
-        return feet, len(np.unique(partner[partner_kind == 3]))
+        return partner, feet, len(set(partner[partner_kind == 3].tolist()))
+
+    def _contacts(self) -> tuple:
+        """(a ground-contact flag per foot, the number of geoms of non-foot bodies touching the ground):
+        within `step`, its one reading after the control step; elsewhere read now."""
+        _, feet, body = self._now if self._now is not None else self._read_contacts()
+        return feet, body
 
     def step(self, action):
-        xy_before = self.data.body(self._main_body).xpos[:2].copy()
+        self._now = self._healthy_now = None
+        xy_before = self.data.xpos[self._body_id, :2].copy()
         self.do_simulation(action, self.frame_skip)
-        xy_after = self.data.body(self._main_body).xpos[:2].copy()
-        xy_velocity = (xy_after - xy_before) / self.dt
+        xy_after = self.data.xpos[self._body_id, :2].copy()
+        if self._needs_contacts or self._ends_on_contact:  # read once for the observation, reward and end
+            self._now = self._read_contacts()
+        self._healthy_now = self.is_healthy
+        xy_velocity = (xy_after - xy_before) / self._dt
         x_velocity, y_velocity = xy_velocity
         speed = x_velocity if self._heading_is_x else float(xy_velocity @ self.heading)
         self._stepped = True
@@ -525,6 +546,7 @@ class LocomotionEnv(AntEnv):
                 "distance_from_origin": np.linalg.norm(self.data.qpos[0:2], ord=2),
                 "x_velocity": x_velocity, "y_velocity": y_velocity, "forward_velocity": speed,
                 **reward_info, **extra_info}
+        self._now = self._healthy_now = None
         if self.render_mode == "human":
             self.render()
         return observation, reward, terminated, False, info
@@ -558,7 +580,7 @@ class LocomotionEnv(AntEnv):
             feet, body_contacts = self._contacts()
             feet_xy = data.geom_xpos[self.feet, :2]
             if w["foot_slip_cost_weight"]:
-                slip = np.square((feet_xy - self._prev_feet_xy) / self.dt).sum(axis=1)
+                slip = np.square((feet_xy - self._prev_feet_xy) / self._dt).sum(axis=1)
                 terms["reward_foot_slip"] = -w["foot_slip_cost_weight"] * float(slip[feet].sum())
             if w["feet_air_time_weight"]:
                 touchdown = feet & (self._air_time > 0)
@@ -566,7 +588,7 @@ class LocomotionEnv(AntEnv):
                     ((self._air_time - self._air_target) * touchdown).sum())
             if w["body_contact_cost_weight"]:
                 terms["reward_body_contact"] = -w["body_contact_cost_weight"] * body_contacts
-            self._air_time = np.where(feet, 0.0, self._air_time + self.dt)
+            self._air_time = np.where(feet, 0.0, self._air_time + self._dt)
             self._prev_contact = feet
             self._prev_feet_xy = feet_xy.copy()
         return sum(terms.values()), terms

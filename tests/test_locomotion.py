@@ -235,6 +235,24 @@ def test_the_step_lies_along_the_heading_of_a_robot_built_facing_minus_x():
     assert loco.crossed()
 
 
+def test_the_contacts_read_once_per_control_step_match_a_fresh_reading():
+    # contact flags and height samples observed, trunk contact ends; a fall line at 42 cm ends episodes often
+    env = env_of("experiment=quadruped_climb", "env.locomotion.healthy_z_range=[0.42,1.0]")
+    loco = env.unwrapped
+    env.reset(seed=3)
+    rng = np.random.default_rng(3)
+    ended = 0
+    for _ in range(300):
+        obs, _, terminated, _, _ = env.step(rng.uniform(-1, 1, 12).astype(np.float32))
+        feet, _ = loco._contacts()  # outside step: read afresh from the simulator
+        assert (obs[-24:-20] == feet).all()
+        assert terminated == ((not loco.is_healthy) or loco.touches_ground())
+        if terminated:
+            ended += 1
+            env.reset(seed=ended)
+    assert 5 < ended < 300  # the end test was exercised both ways
+
+
 def test_terminate_on_contact_ends_the_episode_when_the_trunk_touches_down():
     def trunk_on_the_ground(*overrides):
         env = env_of("env=quadruped", "env.locomotion.healthy_z_range=[0.0,2.0]", *overrides)
