@@ -170,16 +170,19 @@ def summarize(cfg, episodes: dict) -> dict:
 
 
 # What an eval of a locomotion env adds: gait_figures' keys (also in summary.json and the height sweep)
-GAIT_KEYS = ("stride_frequency", "duty_factor", "peak_joint_speed", "body_contact_share")
+GAIT_KEYS = ("stride_frequency", "duty_factor", "peak_joint_speed", "over_speed_limit_share", "body_contact_share")
 
 
 def gait_figures(gaits: list, speed_limit: Optional[float]) -> dict:
-    """Per-episode gait figures (locomotion.GaitMeter) over the eval: means, and the peak joint speed's max."""
+    """Per-episode gait figures (locomotion.GaitMeter) over the eval: means, the peak joint speed's max and,
+    with a speed limit, the share of all the eval's physics steps in which a joint was over it."""
     figures = {key: float(np.mean([g[key] for g in gaits]))
                for key in ("stride_frequency", "duty_factor", "body_contact_share")}
     figures["peak_joint_speed"] = float(max(g["peak_joint_speed"] for g in gaits))
     if speed_limit is not None:
         figures["joint_speed_limit"] = float(speed_limit)
+        over = sum(g["over_speed_limit_time_s"] for g in gaits)
+        figures["over_speed_limit_share"] = float(over / max(sum(g["time_s"] for g in gaits), 1e-9))
     return figures
 
 
@@ -194,7 +197,8 @@ def motion_line(result: dict) -> str:
     elif "success_rate" in result:
         line += f", {result['success_rate']:.0%} of episodes end beyond x={result['success_x']} m"
     if "stride_frequency" in result:
-        limit = f" (limit {result['joint_speed_limit']:g})" if "joint_speed_limit" in result else ""
+        limit = (f" (limit {result['joint_speed_limit']:g}, passed {result['over_speed_limit_share']:.2%} of the time)"
+                 if "joint_speed_limit" in result else "")
         line += (f"; gait: stride frequency {result['stride_frequency']:.1f} Hz, duty factor "
                  f"{result['duty_factor']:.2f}, peak joint speed {result['peak_joint_speed']:.1f} rad/s{limit}, "
                  f"a non-foot body on the ground {result['body_contact_share']:.0%} of the time")

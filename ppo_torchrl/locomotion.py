@@ -96,10 +96,11 @@ def heading_angle(heading) -> Optional[float]:
 
 
 class GaitMeter:
-    """Per episode: foot contacts, touchdowns, peak joint speed, non-foot ground contact, sampled each physics step."""
+    """Per episode: foot contacts, touchdowns, peak joint speed and time over the speed limit, non-foot ground
+    contact, sampled each physics step."""
 
-    def __init__(self, n_feet: int):
-        self.n_feet = n_feet
+    def __init__(self, n_feet: int, speed_limit: Optional[float] = None):
+        self.n_feet, self.speed_limit = n_feet, speed_limit
         self.reset()
 
     def reset(self) -> None:
@@ -109,6 +110,7 @@ class GaitMeter:
         self.touchdowns = np.zeros(self.n_feet, np.int64)
         self.previous = None
         self.peak_joint_speed = 0.0
+        self.over_limit_time = 0.0
         self.body_contact_time = 0.0
 
     def add(self, feet: np.ndarray, joint_speed: float, body_contact: bool, dt: float) -> None:
@@ -119,6 +121,8 @@ class GaitMeter:
         self.time += dt
         self.contact_time += dt * feet
         self.peak_joint_speed = max(self.peak_joint_speed, joint_speed)
+        if self.speed_limit is not None and joint_speed > self.speed_limit:
+            self.over_limit_time += dt
         self.body_contact_time += dt * body_contact
 
     def summary(self) -> dict:
@@ -127,6 +131,8 @@ class GaitMeter:
             "stride_frequency": float(self.touchdowns.mean() / t) if self.n_feet else 0.0,  # Hz, per foot
             "duty_factor": float(self.contact_time.mean() / t) if self.n_feet else 0.0,  # share of time a foot is down
             "peak_joint_speed": float(self.peak_joint_speed),  # rad/s, actuated joints
+            "time_s": float(self.time),
+            "over_speed_limit_time_s": float(self.over_limit_time),  # an actuated joint over joint_speed_limit
             "body_contact_share": float(self.body_contact_time / t),  # share of time a non-foot body touches ground
         }
 
@@ -184,7 +190,7 @@ class LocomotionEnv(AntEnv):
                                     or self._w["feet_air_time_weight"] or self._w["body_contact_cost_weight"])
         self._dt = self.dt  # the control step (s), read from the model once
         self.measure_gait = False  # evaluate sets it: gait figures sampled every physics step
-        self.gait = GaitMeter(len(self.feet))
+        self.gait = GaitMeter(len(self.feet), self._speed_limit)
         self._reset_episode_memory()
         extra = len(self.feet) * self.observe_contacts + self.height_samples
         if extra:

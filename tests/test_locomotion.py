@@ -458,9 +458,26 @@ def test_evaluate_at_a_step_height_reports_gait_figures(step_run):
     result = evaluate.main([f"run={step_run}", "episodes=2", "env.terrain.step_height=0.05"])
     saved = json.loads((step_run / "eval" / "eval.json").read_text())
     assert saved["step_height_mean"] == pytest.approx(0.05) and saved["overrides"] == ["env.terrain.step_height=0.05"]
-    for key in ("success_rate", "stride_frequency", "duty_factor", "peak_joint_speed", "body_contact_share"):
+    for key in ("success_rate", "stride_frequency", "duty_factor", "peak_joint_speed", "over_speed_limit_share",
+                "body_contact_share"):
         assert key in result and key in saved
     assert 0.0 <= result["duty_factor"] <= 1.0 and result["peak_joint_speed"] <= result["joint_speed_limit"]
+    assert result["over_speed_limit_share"] == 0.0  # never over the limit, as the peak says
+
+
+def test_the_gait_meter_counts_the_time_a_joint_is_over_the_speed_limit():
+    from ppo_torchrl.evaluate import gait_figures
+    from ppo_torchrl.locomotion import GaitMeter
+
+    episodes = []
+    for speeds in ([1.0, 9.0, 2.0, 8.0], [3.0] * 6):  # 8.0 is at the limit, not over it
+        meter = GaitMeter(4, speed_limit=8.0)
+        for speed in speeds:
+            meter.add(np.ones(4, bool), speed, False, 0.005)
+        episodes.append(meter.summary())
+    figures = gait_figures(episodes, 8.0)
+    assert figures["peak_joint_speed"] == 9.0 and figures["over_speed_limit_share"] == pytest.approx(1 / 10)
+    assert "over_speed_limit_share" not in gait_figures(episodes, None)
 
 
 def test_height_sweep_writes_a_csv_and_a_success_curve(step_run, tmp_path):
