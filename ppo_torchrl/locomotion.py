@@ -472,13 +472,16 @@ class LocomotionEnv(AntEnv):
         if not self._z_above_terrain:
             return super().is_healthy
         state = self.state_vector()
-        ground = float(self.terrain_height(np.array(self._along(self.data.xpos[self._body_id]))))
         low, high = self._healthy_z_range
-        return bool(np.isfinite(state).all() and low <= state[2] - ground <= high)
+        return bool(np.isfinite(state).all() and low <= state[2] - self._ground_under_body() <= high)
 
     def crossed(self) -> bool:
         """Success on a step env: the main body is success_margin beyond the step's edge."""
         return self._along(self.data.xpos[self._body_id]) >= self.step_edge + self.success_margin
+
+    def _ground_under_body(self) -> float:
+        """The terrain's height under main_body (m)."""
+        return float(self.terrain_height(np.array(self._along(self.data.xpos[self._body_id]))))
 
     def terrain_height(self, x: np.ndarray) -> np.ndarray:
         """Ground height at coordinate x along the heading (the step's top beyond its edge, else the floor at 0)."""
@@ -577,7 +580,7 @@ class LocomotionEnv(AntEnv):
         self._prev_action = np.asarray(action, dtype=np.float64).copy()
         body = data.xpos[self._body_id]
         if w["base_height_cost_weight"]:
-            height = body[2] - float(self.terrain_height(np.array(self._along(body))))
+            height = body[2] - self._ground_under_body()
             terms["reward_base_height"] = -w["base_height_cost_weight"] * (height - self._height_target) ** 2
         if w["orientation_cost_weight"]:
             up = data.xmat[self._body_id].reshape(3, 3)[2] @ self._up0  # cos(tilt from the initial attitude)
