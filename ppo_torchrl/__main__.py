@@ -12,6 +12,7 @@ composed and every value validated (each job of a sweep too), and the run or swe
 from __future__ import annotations
 
 import itertools
+import os
 import sys
 from pathlib import Path
 
@@ -28,7 +29,10 @@ INFO_FLAGS = ("--cfg", "-c", "--info", "-i", "--resolve")
 VALUE_FLAGS = ("--cfg", "-c", "--package", "-p", "--config-path", "-cp", "--config-name", "-cn",
                "--config-dir", "-cd", "--experimental-rerun")
 INFO_VALUES = ("all", "config", "defaults", "defaults-tree", "plugins", "searchpath")
-MAX_VALIDATED_JOBS = 64  # a larger sweep has its first 64 jobs checked up front
+# Keys whose value is a path: passed to Hydra through an environment variable, so any character a path
+# may hold (a quote, a space, non-ASCII) reaches the app as typed, run after run and on resume.
+PATH_KEYS = ("resume", "init_from", "hydra.run.dir", "hydra.sweep.dir")
+PATH_ENV = "PPO_TORCHRL_PATH_{}"
 
 
 def main(cfg) -> float:
@@ -50,14 +54,18 @@ def _run_job(cfg) -> dict:
     state = None
     if cfg.resume:
         run_dir = Path(cfg.resume)
-        user = [o for o in HydraConfig.get().overrides.task if not o.startswith("resume=")]
-        cfg = resume_config(run_dir, user)
         state = checkpoint.load(run_dir / "checkpoints" / checkpoint.LAST)
+        user = [o for o in HydraConfig.get().overrides.task if not o.startswith("resume=")]
+        cfg = resume_config(run_dir, user, state)
     else:
         run_dir = Path(HydraConfig.get().runtime.output_dir)
     # A single run's dir was claimed before Hydra started; a sweep's jobs claim theirs here.
-    rundir.claim(run_dir, resume=bool(cfg.resume))
-    return train(cfg, run_dir, state)
+    multirun = HydraConfig.get().mode.name == "MULTIRUN"
+    rundir.claim(run_dir, resume=bool(cfg.resume), what="job" if multirun else "run")
+    try:
+        return train(cfg, run_dir, state)
+    finally:
+        rundir.rollback(run_dir)  # a job refused before it started training leaves its dir as it was
 
 
 def split_args(argv: list[str]) -> tuple[list[str], list[str]]:
@@ -99,13 +107,13 @@ def check_resume(resume: str, overrides: list[str]) -> Path:
     run_dir = Path(resume).expanduser()
     if not run_dir.is_dir():
         raise ConfigError(f"resume={run_dir}: no such directory; give the run dir of an earlier run")
-    if not (run_dir / "config.yaml").is_file() or not (run_dir / "checkpoints" / "last.pt").is_file():
-        raise ConfigError(f"resume={run_dir} is not a ppo_torchrl run dir with a checkpoint: it needs config.yaml "
-                          "and checkpoints/last.pt")
-    cfg = resume_config(run_dir, [o for o in overrides if not o.startswith("resume=")])
+    if not (run_dir / "checkpoints" / "last.pt").is_file():
+        raise ConfigError(f"resume={run_dir} is not a ppo_torchrl run dir with a checkpoint: it needs "
+                          "checkpoints/last.pt")
+    state = checkpoint.load(run_dir / "checkpoints" / checkpoint.LAST)
+    cfg = resume_config(run_dir, [o for o in overrides if not o.startswith("resume=")], state, announce=True)
     validate_config(cfg)
-    check_frames_left(run_dir, checkpoint.load(run_dir / "checkpoints" / checkpoint.LAST)["frames"],
-                      cfg.collector.total_frames)
+    check_frames_left(run_dir, state["frames"], cfg.collector.total_frames)
     return run_dir
 
 
@@ -128,6 +136,17 @@ def compose(overrides: list[str], with_hydra: bool = False):
         raise ConfigError(one_line(exc)) from exc
 
 
+def hydra_value(cfg, key: str):
+    """A value of the composed hydra node (e.g. hydra.run.dir); an interpolation that fails is one line."""
+    from omegaconf import OmegaConf
+    from omegaconf.errors import OmegaConfBaseException
+
+    try:
+        return OmegaConf.select(cfg, key, throw_on_missing=True)
+    except OmegaConfBaseException as exc:
+        raise ConfigError(f"{key}: {str(exc).splitlines()[0]}; fix the value given to {key}") from None
+
+
 def sweep_jobs(overrides: list[str]) -> list[list[str]]:
     """The override lists of a sweep's jobs (discrete sweeps expanded; an interval is left to the sweeper)."""
     from hydra.core.override_parser.overrides_parser import OverridesParser
@@ -146,7 +165,7 @@ def sweep_jobs(overrides: list[str]) -> list[list[str]]:
         elif override.is_discrete_sweep():
             key = override.get_key_element()
             axes.append([f"{key}={value}" for value in override.sweep_string_iterator()])
-    return [list(job) for job in itertools.islice(itertools.product(*axes), MAX_VALIDATED_JOBS)]
+    return [list(job) for job in itertools.product(*axes)]
 
 
 def hydra_overrides(overrides: list[str]) -> list[str]:
@@ -161,9 +180,38 @@ def announce_study(hydra_cfg) -> None:
     name, storage = sweeper.study_name, sweeper.storage
     if storage.startswith("sqlite:///"):  # sqlite makes the file, not its folder
         Path(storage[len("sqlite:///"):]).parent.mkdir(parents=True, exist_ok=True)
+    if int(sweeper.get("n_trials", 1)) < 1:
+        raise ConfigError(f"hydra.sweeper.n_trials={sweeper.n_trials} must be >= 1")
     trials = {study.study_name: study.n_trials for study in optuna.get_all_study_summaries(storage)}
     state = f"resuming study {name} with {trials[name]} trials" if name in trials else f"new study {name}"
+    if name in trials:
+        state += check_stored_study(optuna.load_study(study_name=name, storage=storage), sweeper.params or {})
     print(f"optuna: {state} in {storage}", file=sys.stderr, flush=True)
+
+
+def check_stored_study(study, params) -> str:
+    """A stored study must search the space the command gives (Optuna would fail in the first trial and leave
+    it RUNNING); trials an interrupted sweep left RUNNING are marked failed. Returns what it did, for the line."""
+    import optuna
+
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+    from hydra_plugins.hydra_optuna_sweeper._impl import create_optuna_distribution_from_override
+
+    wanted = {}
+    for key, value in params.items():
+        override = OverridesParser.create().parse_override(f"{key}={value}")
+        wanted[key] = create_optuna_distribution_from_override(override)
+    trials = study.get_trials(deepcopy=False)
+    for trial in trials:
+        for key, distribution in trial.distributions.items():
+            if key in wanted and wanted[key] != distribution:
+                raise ConfigError(f"optuna study {study.study_name} searched {key} over {distribution}, this command "
+                                  f"over {wanted[key]}; keep the stored space or name a new study with "
+                                  "hydra.sweeper.study_name=<name>")
+    stale = [t for t in trials if t.state == optuna.trial.TrialState.RUNNING]
+    for trial in stale:
+        study._storage.set_trial_state(trial._trial_id, optuna.trial.TrialState.FAIL)
+    return f" ({len(stale)} left running by an interrupted sweep marked failed)" if stale else ""
 
 
 def dry_run(flags: list[str], overrides: list[str]) -> list[str]:
@@ -192,12 +240,33 @@ def dry_run(flags: list[str], overrides: list[str]) -> list[str]:
     return [*shown, *jobs[0], *hydra_overrides(overrides), "hydra.mode=MULTIRUN"]
 
 
-def quoted(path: Path) -> str:
-    return "'" + str(path).replace("\\", "\\\\").replace("'", "\\'") + "'"
+def path_override(key: str, value) -> str:
+    """`key=${oc.env:...}`: the path as typed, whatever characters it holds (see PATH_KEYS)."""
+    name = PATH_ENV.format(key.replace(".", "_").upper())
+    os.environ[name] = str(value)
+    return f"{key}=${{oc.env:{name}}}"
 
 
-def with_override(argv: list[str], key: str, value: str) -> list[str]:
-    return [a for a in argv if not a.startswith(f"{key}=")] + [f"{key}={value}"]
+def unquote(value: str) -> str:
+    """A value the user quoted for Hydra ('...' or "..."), as the path it names."""
+    if len(value) >= 2 and value[0] == value[-1] and value[0] in "'\"":
+        return value[1:-1].replace("\\" + value[0], value[0])
+    return value
+
+
+def route_paths(argv: list[str]) -> list[str]:
+    """Path-valued overrides go to Hydra through environment variables (PATH_KEYS)."""
+    out = []
+    for arg in argv:
+        key, sep, value = arg.partition("=")
+        if sep and key in PATH_KEYS and "${" not in value:  # an interpolation (${now:...}) stays Hydra's
+            arg = path_override(key, unquote(value))
+        out.append(arg)
+    return out
+
+
+def with_override(argv: list[str], key: str, value) -> list[str]:
+    return [a for a in argv if not a.startswith(f"{key}=")] + [path_override(key, value)]
 
 
 def prepare(argv: list[str]) -> list[str]:
@@ -208,9 +277,10 @@ def prepare(argv: list[str]) -> list[str]:
     flags, overrides = split_args(argv)
     if any(f in HELP_FLAGS for f in flags):
         return argv
+    resume = next((unquote(o.split("=", 1)[1]) for o in overrides if o.startswith("resume=")), None)
+    argv, overrides = route_paths(argv), route_paths(overrides)
     check_env_override(overrides)
     multirun = "-m" in flags or "--multirun" in flags
-    resume = next((o.split("=", 1)[1] for o in overrides if o.startswith("resume=")), None)
     jobs = sweep_jobs(overrides) if multirun else [overrides]
     if any(f in INFO_FLAGS for f in flags):  # print or inspect: check the config, write nothing
         for job in jobs:
@@ -220,21 +290,21 @@ def prepare(argv: list[str]) -> list[str]:
         run_dir = check_resume(resume, overrides)
         rundir.claim(run_dir, resume=True)
         # Keep the run's own .hydra/ as it was: the saved config is the one that resumes.
-        return argv + [f"hydra.run.dir={quoted(run_dir)}", "hydra.output_subdir=null"]
-    for job in jobs:
+        return with_override(argv, "hydra.run.dir", run_dir) + ["hydra.output_subdir=null"]
+    for job in jobs:  # every job, before the first one runs (the env is built once per env config)
         validate_config(compose(job))
     hydra_cfg = compose(jobs[0] + hydra_overrides(overrides) if multirun else overrides, with_hydra=True)
     overwrite = bool(hydra_cfg.get("overwrite", False))
     if multirun:
         if any(o.startswith("hparams_search=") for o in overrides):
             announce_study(hydra_cfg)
-        sweep_dir = Path(hydra_cfg.hydra.sweep.dir)
+        sweep_dir = Path(hydra_value(hydra_cfg, "hydra.sweep.dir"))
         rundir.claim(sweep_dir, overwrite=overwrite, what="sweep")
-        return with_override(argv, "hydra.sweep.dir", quoted(sweep_dir))
-    run_dir = Path(hydra_cfg.hydra.run.dir)
+        return with_override(argv, "hydra.sweep.dir", sweep_dir)
+    run_dir = Path(hydra_value(hydra_cfg, "hydra.run.dir"))
     rundir.claim(run_dir, overwrite=overwrite)
     signals.ON_DISK.run_dir = run_dir
-    return with_override(argv, "hydra.run.dir", quoted(run_dir))
+    return with_override(argv, "hydra.run.dir", run_dir)
 
 
 def one_line(exc: BaseException) -> str:
@@ -264,8 +334,13 @@ def cli() -> None:
 
     import ppo_torchrl.config  # noqa: F401  (registers the schemas)
 
+    from ppo_torchrl import rundir
+
     sys.argv = [sys.argv[0]] + prepare(sys.argv[1:])
-    hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")(main)()
+    try:
+        hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")(main)()
+    finally:  # a sweep dir whose every job was refused, or a run stopped before it started: as it was
+        rundir.finish()
 
 
 if __name__ == "__main__":

@@ -8,43 +8,25 @@ leaves the previous checkpoint intact.
 
 from __future__ import annotations
 
-import json
-import os
-import tempfile
+import io
 from pathlib import Path
 from typing import Optional
 
 import torch
 
 from ppo_torchrl.errors import ConfigError
+from ppo_torchrl.rundir import atomic_write_bytes
 
 LAST = "last.pt"
 BEST = "best.pt"
 
 
-def atomic_write_bytes(path: Path, write) -> None:
-    """Call write(file) on a temp file in path's folder, fsync it, then rename it onto path."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            write(f)
-            f.flush()
-            os.fsync(f.fileno())
-        os.chmod(tmp, 0o644)  # mkstemp makes files private; these are ordinary outputs
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
-def atomic_write_json(path: Path, data: dict) -> None:
-    atomic_write_bytes(path, lambda f: f.write((json.dumps(data, indent=2, default=float) + "\n").encode()))
-
-
 def save(path: Path, state: dict) -> None:
-    atomic_write_bytes(path, lambda f: torch.save(state, f))
+    # Serialized in memory first: torch's zip writer reports a full disk as "unexpected pos ...", a plain
+    # write reports it as ENOSPC, which the error path turns into one line.
+    buffer = io.BytesIO()
+    torch.save(state, buffer)
+    atomic_write_bytes(path, lambda f: f.write(buffer.getbuffer()))
 
 
 def load(path: Path | str) -> dict:
@@ -105,8 +87,8 @@ def check_spec(state: dict, spec, env_id: str) -> None:
 def resolve_checkpoint(run_dir: Path, which: str) -> Path:
     """`best`, `last` or a file path (absolute, or relative to the run's checkpoints dir)."""
     run_dir = Path(run_dir)
-    if not (run_dir / "config.yaml").is_file():
-        raise ConfigError(f"run={run_dir} is not a ppo_torchrl run dir (no config.yaml)")
+    if not (run_dir / "checkpoints").is_dir():
+        raise ConfigError(f"run={run_dir} is not a ppo_torchrl run dir (no checkpoints/)")
     if which in ("best", "last"):
         path = run_dir / "checkpoints" / f"{which}.pt"
         if which == "best" and not path.exists():
@@ -118,15 +100,13 @@ def resolve_checkpoint(run_dir: Path, which: str) -> Path:
 
 def load_policy(run_dir: Path, which: str = "best"):
     """(config, actor-critic with the checkpoint's weights, checkpoint state) of a finished run."""
-    from omegaconf import OmegaConf
-
-    from ppo_torchrl.config import Config
+    from ppo_torchrl.config import run_config
     from ppo_torchrl.envs import env_spec
     from ppo_torchrl.models import make_actor_critic
 
     path = resolve_checkpoint(run_dir, which)
     state = load(path)
-    cfg = OmegaConf.merge(OmegaConf.structured(Config), OmegaConf.load(Path(run_dir) / "config.yaml"))
+    cfg = run_config(run_dir, state, announce=True)  # the checkpoint's config, not a damaged config.yaml's
     spec = env_spec(cfg.env)
     check_spec(state, spec, cfg.env.id)
     ac = make_actor_critic(cfg.policy, spec)

@@ -318,17 +318,44 @@ def register_configs() -> None:
 register_configs()
 
 
-def resume_config(run_dir, overrides):
-    """The saved config of `run_dir` with this command's `key=value` overrides applied on top. A group
-    choice (`logger=csv`) is accepted when it is the run's own (`.hydra/hydra.yaml`), refused otherwise."""
+def run_config(run_dir, state: dict, announce: bool = False):
+    """A run's config, from its checkpoint (which holds the resolved config it trained with): `config.yaml`
+    can be damaged or edited by hand, and filling its missing keys with defaults would train or evaluate
+    another config. When config.yaml disagrees, one warning line says which was used."""
+    import sys
     from pathlib import Path
 
     from ppo_torchrl.errors import ConfigError
 
-    saved = OmegaConf.load(Path(run_dir) / "config.yaml")
-    cfg = OmegaConf.merge(OmegaConf.structured(Config), saved)
+    saved = state.get("config")
+    if not isinstance(saved, dict):
+        raise ConfigError(f"the checkpoint of {run_dir} holds no config; it was not made by ppo_torchrl's trainer")
+    cfg = OmegaConf.merge(OmegaConf.structured(Config), OmegaConf.create(saved))
+    if announce:
+        try:
+            on_disk = OmegaConf.to_container(OmegaConf.load(Path(run_dir) / "config.yaml"))
+            same = on_disk == OmegaConf.to_container(OmegaConf.create(saved))
+        except Exception:  # noqa: BLE001 - missing, truncated or not YAML: the checkpoint's config is used
+            same = False
+        if not same:
+            print(f"warning: {Path(run_dir) / 'config.yaml'} is missing, damaged or differs from the checkpoint's "
+                  "config; using the checkpoint's", file=sys.stderr, flush=True)
+    return cfg
+
+
+def resume_config(run_dir, overrides, state: dict, announce: bool = False):
+    """The checkpoint's config of `run_dir` (run_config) with this command's `key=value` overrides applied on
+    top. A group choice (`logger=csv`) is accepted when it is the run's own (`.hydra/hydra.yaml`), refused otherwise."""
+    from pathlib import Path
+
+    from ppo_torchrl.errors import ConfigError
+
+    cfg = run_config(run_dir, state, announce)
     hydra_file = Path(run_dir) / ".hydra" / "hydra.yaml"
-    choices = OmegaConf.load(hydra_file).hydra.runtime.choices if hydra_file.is_file() else {}
+    try:
+        choices = OmegaConf.load(hydra_file).hydra.runtime.choices if hydra_file.is_file() else {}
+    except Exception:  # noqa: BLE001 - a damaged hydra.yaml: group choices cannot be compared, so none is accepted
+        choices = {}
     for override in overrides:
         group, _, option = override.partition("=")
         if group in choices:

@@ -224,6 +224,9 @@ def make_gym_env(env_cfg, render_mode: Optional[str] = None, evaluation: bool = 
         )
     if len(env.observation_space.shape) != 1:
         raise ConfigError(f"env '{env_cfg.id}' has observations of shape {env.observation_space.shape}; a flat vector is required")
+    if env.observation_space.dtype != np.float64:  # the env boundary: every path (training, eval, export)
+        with np.errstate(over="ignore"):  # gymnasium's Box compares the float32 bounds in float64: no overflow here
+            env = gym.wrappers.DtypeObservation(env, np.float64)  # sees float64 observations, as MuJoCo's envs give
     return env
 
 

@@ -18,13 +18,15 @@ import multiprocessing as mp
 import os
 import queue
 import signal
+import sys
 from typing import Callable, Dict, List
 
 from ppo_torchrl.envs import episode_seeds
-from ppo_torchrl.errors import ConfigError
+from ppo_torchrl.errors import ConfigError, EnvironmentFault
 from ppo_torchrl.evaluate import evaluate_policy, merge_episodes, run_episodes, summarize
 
 BACKGROUND_AUTO_MIN_FRAMES = 150_000
+MAX_RESTARTS = 3  # a worker that dies more often than this is not a one-off kill: the run stops, saying so
 BACKGROUND_CHOICES = ("auto", "true", "false")
 
 
@@ -42,22 +44,47 @@ class BackgroundEval:
     def __init__(self, cfg, write_row: Callable[[dict], None], on_result: Callable[[int, dict, object], dict]):
         from omegaconf import OmegaConf
 
+        self._cfg, self._write_row, self._on_result = cfg, write_row, on_result
+        self._cfg_dict = OmegaConf.to_container(cfg, resolve=True)
+        self._pending: Dict[int, object] = {}  # frames -> what on_result gets back with the result
+        self._sent: Dict[object, dict] = {}  # frames (None: a share of the final eval) -> the job, until back
+        self._waiting: List[dict] = []  # rows logged while an earlier eval is out, in order
+        self._restarts = 0
+        self._start()
+
+    def _start(self) -> None:
         # fork where there is one (Linux, as torch's DataLoader workers): spawn would import the user's
         # __main__ again, which a script without an `if __name__ == "__main__"` guard cannot take.
         context = mp.get_context("fork" if "fork" in mp.get_all_start_methods() else "spawn")
         self._jobs, self._results = context.Queue(), context.Queue()
         self._process = context.Process(target=_serve, name="ppo_torchrl-eval", daemon=True,
-                                        args=(OmegaConf.to_container(cfg, resolve=True), self._jobs,
-                                              self._results, os.getpid()))
+                                        args=(self._cfg_dict, self._jobs, self._results, os.getpid()))
         self._process.start()
-        self._cfg, self._write_row, self._on_result = cfg, write_row, on_result
-        self._pending: Dict[int, object] = {}  # frames -> what on_result gets back with the result
-        self._waiting: List[dict] = []  # rows logged while an earlier eval is out, in order
+
+    def _restart(self) -> None:
+        """The worker died (killed, out of memory): one warning line, a new worker, the evals it had sent again."""
+        code = self._process.exitcode
+        self._restarts += 1
+        if self._restarts > MAX_RESTARTS:
+            raise EnvironmentFault(f"the background eval process died {self._restarts} times (last exit code {code}); "
+                                   "run with eval.background=false to evaluate in the training process")
+        print(f"warning: the background eval process died (exit code {code}); started a new one and sent it the "
+              f"{len(self._sent)} eval(s) not back yet", file=sys.stderr, flush=True)
+        for old in (self._jobs, self._results):  # a worker killed mid-read can leave a queue's lock held: new ones
+            old.cancel_join_thread()
+            old.close()
+        self._start()
+        for job in self._sent.values():
+            self._jobs.put(job)
+
+    def _put(self, job: dict) -> None:
+        self._sent[job["frames"]] = job
+        self._jobs.put(job)
 
     def submit(self, frames: int, job: dict, keep: object = None) -> None:
         """Evaluate `job` (actor weights, obs stats, episodes, seed, deterministic, video path) for `frames`."""
         self._pending[frames] = keep
-        self._jobs.put({"frames": frames, **job})
+        self._put({"frames": frames, **job})
 
     def log(self, row: dict) -> None:
         """Write the row now, or once the evals before it (and its own) are back."""
@@ -89,8 +116,8 @@ class BackgroundEval:
         seeds = episode_seeds(seed, episodes)
         half = episodes // 2
         actor = {k: v.detach().to("cpu", copy=True) for k, v in ac.actor.state_dict().items()}
-        self._jobs.put({"frames": None, "actor": actor, "obs_stats": copy.deepcopy(obs_stats), "seeds": seeds[half:],
-                        "seed": seed, "deterministic": True})
+        self._put({"frames": None, "actor": actor, "obs_stats": copy.deepcopy(obs_stats), "seeds": seeds[half:],
+                   "seed": seed, "deterministic": True})
         mine = run_episodes(self._cfg, ac, obs_stats, seeds[:half], True, video_path)
         return summarize(self._cfg, merge_episodes(mine, self._receive(block=True)[1]))
 
@@ -102,10 +129,11 @@ class BackgroundEval:
                 frames, result, error = self._results.get(block=block, timeout=1.0 if block else None)
                 break
             except queue.Empty:
+                if self._sent and not self._process.is_alive():
+                    self._restart()
                 if not block:
                     return None
-                if not self._process.is_alive():
-                    raise RuntimeError(f"the background eval process exited (code {self._process.exitcode})")
+        self._sent.pop(frames, None)
         if error is not None:
             name, message, config_error = error
             raise ConfigError(message) if config_error else RuntimeError(f"background eval: {name}: {message}")
@@ -114,6 +142,7 @@ class BackgroundEval:
     def close(self) -> None:
         """Stop the worker; rows still waiting are written without the evals that are not back."""
         self._pending.clear()
+        self._sent.clear()
         self.poll()
         try:
             self._jobs.put(None)

@@ -219,7 +219,7 @@ def apply_overrides(cfg, overrides: list[str]):
     """`env.<key>=<value>` arguments on the run's saved config, typed and checked as training checks them."""
     from omegaconf import OmegaConf
 
-    from ppo_torchrl.validation import locomotion_checks, terrain_checks
+    from ppo_torchrl.locomotion import locomotion_checks, terrain_checks
 
     for override in overrides:
         try:
@@ -281,9 +281,10 @@ def height_sweep(cfg, ac, obs_stats, heights: list[float], episodes: int, seed: 
 
 
 def main(argv: list[str]) -> dict:
-    from ppo_torchrl.checkpoint import atomic_write_json, check_spec, load_policy
+    from ppo_torchrl.checkpoint import check_spec, load_policy
     from ppo_torchrl.cli import parse_args
     from ppo_torchrl.envs import env_spec
+    from ppo_torchrl.rundir import atomic_write_json, is_run, record, unwritable
 
     usage = ("python -m ppo_torchrl.evaluate run=<run dir> [checkpoint=best|last|<file>] [episodes=10] [video=false] "
              "[seed=0] [heights=<m,m,...> [out=<dir>]] [env.<key>=<value> ...]")
@@ -295,7 +296,7 @@ def main(argv: list[str]) -> dict:
         "seed": "episode i starts from seed * 1000 + i: the same seed replays the same episodes",
         "heights": "step heights in m, e.g. 0,0.05,0.1,0.15,0.2: evaluate at each; writes height_sweep.csv and the "
                    "success-rate curve height_sweep.png",
-        "out": "where heights= writes its files (empty: <run dir>/eval)",
+        "out": "where the eval writes its files: eval.json, the video, a height sweep's (empty: <run dir>/eval)",
     }
     about = ("Runs the policy deterministically on a fresh env with the run's frozen normalization stats, prints\n"
              "mean +- std return and length (MJCF robots: forward velocity, gait figures; step envs: the share of\n"
@@ -312,6 +313,10 @@ def main(argv: list[str]) -> dict:
     if heights and args["video"]:
         raise ConfigError("video=true films one evaluation; leave it out of a heights= sweep")
     run_dir = Path(args["run"])
+    out_dir = Path(args["out"]) if args["out"] else run_dir / "eval"
+    why = unwritable(out_dir)  # before any episode runs
+    if why:
+        raise ConfigError(f"cannot write the eval's files in {out_dir}: {why}; give a writable dir with out=<dir>")
     cfg, ac, state = load_policy(run_dir, args["checkpoint"])
     if overrides:
         cfg = apply_overrides(cfg, overrides)
@@ -319,18 +324,21 @@ def main(argv: list[str]) -> dict:
     obs_stats = state["normalization"]["obs"]
     label = f"{env_label(cfg.env)} @ {state['frames']} frames ({args['checkpoint']})"
     if heights:
-        out_dir = Path(args["out"]) if args["out"] else run_dir / "eval"
         rows = height_sweep(cfg, ac, obs_stats, heights, args["episodes"], args["seed"], out_dir,
                             f"{run_dir.resolve().name}\n{label}")
         print(f"{label}: height sweep over {args['episodes']} episodes per height: "
               f"{out_dir / SWEEP_FILES[0]}, {out_dir / SWEEP_FILES[1]}")
+        if is_run(run_dir):
+            record(run_dir)
         return {"heights": rows}
-    video = run_dir / "eval" / f"{args['checkpoint'] if args['checkpoint'] in ('best', 'last') else 'checkpoint'}.mp4"
+    video = out_dir / f"{args['checkpoint'] if args['checkpoint'] in ('best', 'last') else 'checkpoint'}.mp4"
     result = evaluate_policy(cfg, ac, obs_stats, args["episodes"], seed=args["seed"],
                              video_path=video if args["video"] else None, progress=True)
     result.update(env=env_label(cfg.env), checkpoint=args["checkpoint"], checkpoint_frames=state["frames"],
                   episodes=args["episodes"], video=str(video) if args["video"] else None, overrides=overrides)
-    atomic_write_json(run_dir / "eval" / "eval.json", result)
+    atomic_write_json(out_dir / "eval.json", result)
+    if is_run(run_dir):
+        record(run_dir)
     print(f"{label}: return {result['return_mean']:.1f} +- "
           f"{result['return_std']:.1f}, length {result['length_mean']:.0f} +- {result['length_std']:.0f} "
           f"over {args['episodes']} episodes" + motion_line(result) + (f"; video: {video}" if args["video"] else ""))

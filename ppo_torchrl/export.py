@@ -67,6 +67,7 @@ def export_policy(cfg, ac: ActorCritic, obs_stats: Optional[dict], path: Path) -
 def main(argv: list[str]) -> Path:
     from ppo_torchrl.checkpoint import load_policy
     from ppo_torchrl.cli import parse_args
+    from ppo_torchrl.rundir import is_run, record, unwritable
 
     usage = "python -m ppo_torchrl.export run=<run dir> [checkpoint=best|last|<file>]"
     help = {"run": "the run dir whose policy is exported; writes <run dir>/policy.pt",
@@ -76,7 +77,12 @@ def main(argv: list[str]) -> Path:
     args = parse_args(argv, {"run": None, "checkpoint": "best"}, usage, help, about)
     run_dir = Path(args["run"])
     cfg, ac, state = load_policy(run_dir, args["checkpoint"])
+    why = unwritable(run_dir)
+    if why:
+        raise ConfigError(f"cannot write {run_dir / 'policy.pt'}: {why}; copy the run dir somewhere writable")
     path = export_policy(cfg, ac, state["normalization"]["obs"], run_dir / "policy.pt")
+    if is_run(run_dir):
+        record(run_dir)
     print(f"exported {cfg.env.id} policy ({args['checkpoint']}, {state['frames']} frames) to {path}")
     return path
 

@@ -644,3 +644,67 @@ class LocomotionEnv(AntEnv):
 
     def gait_summary(self) -> dict:
         return self.gait.summary()
+
+
+# ---------------------------------------------------------------- config checks (validation.py calls them)
+MIN_JOINT_SPEED_LIMIT = 0.1  # rad/s; below it every joint is held still (1e-300 froze the robot)
+
+
+def locomotion_checks(loco) -> list:
+    """env.locomotion: limits > 0, gains and weights >= 0 (the reward terms subtract costs, add air time)."""
+    def positive(key):
+        value = loco.get(key)
+        return value is None or value > 0, f"env.locomotion.{key}={value} must be > 0 (or null: as the model has it)"
+
+    def non_negative(key):
+        value = loco.get(key)
+        return value is None or value >= 0, f"env.locomotion.{key}={value} must be >= 0"
+
+    weights = [k for k in loco if str(k).endswith("_weight") and k not in ("forward_reward_weight", "healthy_reward")]
+    speed_limit = loco.get("joint_speed_limit")
+    return ([positive(k) for k in ("target_speed", "torque_limit", "base_height_target")]
+            + [(speed_limit is None or speed_limit >= MIN_JOINT_SPEED_LIMIT,
+                f"env.locomotion.joint_speed_limit={speed_limit} must be >= {MIN_JOINT_SPEED_LIMIT} rad/s "
+                "(or null: as the model has it)")]
+            + [non_negative(k) for k in ("kp", "kd", "armature", "feet_air_time_target", *weights)])
+
+
+def terrain_checks(terrain) -> list:
+    """env.terrain: heights >= 0, [min, max] ranges with min <= max, a threshold in (0, 1], counts >= 1."""
+    if terrain is None:
+        return []
+
+    def span(key, low_ok):
+        value = terrain.get(key)
+        if value is None:
+            return True, ""
+        value = list(value)
+        ok = len(value) == 2 and low_ok(value[0]) and value[0] <= value[1]
+        floor = "0 <= min" if key == "step_height_range" else "0 < min"
+        return ok, f"env.terrain.{key}={value} must be [min, max] with {floor} <= max (m)"
+
+    height, eval_height = terrain.get("step_height"), terrain.get("eval_step_height")
+    return [
+        (height is None or height >= 0, f"env.terrain.step_height={height} must be >= 0 (m)"),
+        (eval_height is None or eval_height >= 0, f"env.terrain.eval_step_height={eval_height} must be >= 0 (m)"),
+        span("step_height_range", lambda low: low >= 0),
+        span("step_distance", lambda low: low > 0),
+        (0 < terrain.curriculum_threshold <= 1,
+         f"env.terrain.curriculum_threshold={terrain.curriculum_threshold} must be in (0, 1]: a success rate"),
+        (terrain.curriculum_window >= 1, f"env.terrain.curriculum_window={terrain.curriculum_window} must be >= 1"),
+        (terrain.curriculum_step > 0, f"env.terrain.curriculum_step={terrain.curriculum_step} must be > 0 (m)"),
+        (terrain.curriculum_down_threshold is None or 0 <= terrain.curriculum_down_threshold < terrain.curriculum_threshold,
+         f"env.terrain.curriculum_down_threshold={terrain.curriculum_down_threshold} must be in "
+         f"[0, curriculum_threshold={terrain.curriculum_threshold}): a success rate"),
+        (terrain.get("curriculum_band") is None or terrain.curriculum_band > 0,
+         f"env.terrain.curriculum_band={terrain.get('curriculum_band')} must be > 0 (m) or null"),
+        (0 <= terrain.curriculum_band_share <= 1,
+         f"env.terrain.curriculum_band_share={terrain.curriculum_band_share} must be in [0, 1]: a share of episodes"),
+        (0 <= terrain.flat_share <= 1, f"env.terrain.flat_share={terrain.flat_share} must be in [0, 1]: a share of episodes"),
+        (not terrain.curriculum or terrain.step_height_range is not None,
+         "env.terrain.curriculum=true needs env.terrain.step_height_range=[min, max] to widen"),
+        (terrain.success_margin >= 0, f"env.terrain.success_margin={terrain.success_margin} must be >= 0 (m)"),
+        (terrain.height_samples >= 0, f"env.terrain.height_samples={terrain.height_samples} must be >= 0"),
+        (terrain.height_sample_spacing > 0,
+         f"env.terrain.height_sample_spacing={terrain.height_sample_spacing} must be > 0 (m)"),
+    ]

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Dict, List
 
 from ppo_torchrl.errors import ConfigError
+from ppo_torchrl.rundir import is_run, record, unwritable
 
 PANELS = [
     ("train/entropy", "policy entropy"),
@@ -37,7 +38,11 @@ def read_metrics(path: Path) -> Dict[str, List[float]]:
         rows = list(csv.DictReader(f))
     if not rows:
         raise ConfigError(f"{path} has no rows yet: the run has not finished an iteration")
-    return {key: [float(r[key]) if r[key] not in ("", None) else float("nan") for r in rows] for key in rows[0]}
+    try:
+        return {key: [float(r[key]) if r[key] not in ("", None) else float("nan") for r in rows] for key in rows[0]}
+    except (TypeError, ValueError, KeyError):
+        raise ConfigError(f"{path} is damaged (a row that is not numbers); restore it, or delete the damaged rows, "
+                          "and run the report again") from None
 
 
 def last100_label(m: Dict[str, List[float]]) -> str:
@@ -209,6 +214,9 @@ def main(argv: List[str]) -> List[Path]:
     target = Path(argv[0])
     if not target.is_dir():
         raise ConfigError(f"{target} is not a directory")
+    why = unwritable(target)
+    if why:
+        raise ConfigError(f"cannot write the report into {target}: {why}; copy the dir somewhere writable and run it there")
     if (target / "metrics.csv").is_file():
         outputs = [plot_run(target)]
     elif (target / "multirun.yaml").is_file() or any(target.glob("*/.hydra")):
@@ -217,6 +225,8 @@ def main(argv: List[str]) -> List[Path]:
         raise ConfigError(f"{target} is neither a run dir (metrics.csv) nor a sweep dir (multirun.yaml)")
     for out in outputs:
         print(f"wrote {out}")
+    if is_run(target):
+        record(target)
     return outputs
 
 

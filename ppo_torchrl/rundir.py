@@ -1,64 +1,172 @@
-"""Run dirs are owned: one run per dir, one process per dir at a time.
+"""Run dirs are owned: one run per dir, one process per dir at a time, and only the app's files touched.
 
-- A new run needs a dir that does not exist or is empty. A dir that holds a run (its metrics.csv,
-  summary.json, checkpoints/, or config.yaml beside .hydra/) is refused unless `overwrite=true`, which removes that
-  run's files first; a non-empty dir that holds no run is refused always (it is somebody's files).
+- Each run dir holds a manifest (`.ppo_torchrl.json`) of the files this app wrote there (`record`).
+  A dir is a run dir only when it has one and every file in it is listed (or is a checkpoint or
+  temporary file of a write killed before it was listed), with no symlink anywhere.
+- A new run needs a dir that does not exist or is empty. A run dir is refused unless
+  `overwrite=true`; a dir holding anything else is always refused (it is somebody's files).
+- `overwrite=true` checks the whole dir first, then moves the old run's listed files aside
+  (`.replaced/`) and deletes them only once the new run has started (`commit`): a command refused
+  after the claim (a bad `init_from`, a Ctrl-C during start-up) puts everything back (`rollback`),
+  and removes the dir it created. Only listed files are ever deleted, never a whole tree.
 - `resume=<dir>` continues the run in its own dir.
-- A lock (`<dir>/.lock`, an OS file lock held for the life of the process, released even by kill -9)
-  stops a second process from writing into a dir in use; the refusal names the other process.
+- A lock on the dir itself (`flock` of its file descriptor: released even by kill -9, no file
+  written) stops a second process from writing into a dir in use; the refusal names the holder.
 
 `claim()` runs before Hydra or the app writes anything, so a refused command changes nothing.
 """
 
 from __future__ import annotations
 
+import errno
 import fcntl
+import json
 import os
-import shutil
+import re
+import tempfile
 from pathlib import Path
+from typing import Dict, List, Optional
 
-from ppo_torchrl.errors import ConfigError
+from ppo_torchrl.errors import ConfigError, EnvironmentFault
 
-LOCK = ".lock"
-RUN_MARKERS = ("metrics.csv", "summary.json", "checkpoints")  # and config.yaml beside .hydra/
-# What a run writes into its dir (Hydra's too): what overwrite=true removes, and nothing else.
-RUN_FILES = RUN_MARKERS + ("config.yaml", ".hydra", "logs", "videos", "eval", "report.png", "policy.pt", "error.log",
-                           "__main__.log", "multirun.yaml")
+MANIFEST = ".ppo_torchrl.json"
+STASH = ".replaced"
+LEGACY_LOCK = ".lock"  # earlier versions locked a file of this name; a leftover one is ours
+# What the app writes, by place: `record` lists the files that match. logs/ is the loggers' (any name).
+OWNED = re.compile(r"^(?:config\.yaml|metrics\.csv|summary\.json|report\.png|policy\.pt|error\.log|__main__\.log"
+                   r"|multirun\.yaml|optimization_results\.yaml|sweep_report\.(?:png|md|csv)|\.lock"
+                   r"|\.hydra/(?:config|hydra|overrides)\.yaml|checkpoints/(?:last|best|frames_\d+)\.pt"
+                   r"|videos/[^/]+\.mp4|eval/[^/]+\.(?:json|csv|png|mp4)|logs/.+)$")
+# Listed or not, these are the app's in an app's dir: a checkpoint or a temp file of a write cut short.
+UNLISTED_OK = re.compile(r"^(?:checkpoints/(?:last|best|frames_\d+)\.pt|(?:.+/)?\.[^/]+\.tmp)$")
 
-_held: dict = {}  # dir -> open lock file, kept for the life of the process
+_held: Dict[Path, int] = {}  # dir -> open descriptor holding its lock, for the life of the process
+_pending: Dict[Path, dict] = {}  # claimed dirs not yet committed: what rollback() undoes
 
 
-def holds_run(directory: Path) -> bool:
+def _files(directory: Path) -> List[str]:
+    """Every file under `directory` (relative, '/'-separated), the manifest and the stash left out.
+    A symlink anywhere is refused: the app never writes one, and following it could delete elsewhere."""
+    found = []
+    for root, dirs, files in os.walk(directory):
+        rel_root = Path(root).relative_to(directory)
+        if rel_root == Path("."):
+            dirs[:] = [d for d in dirs if d != STASH]
+        for name in dirs + files:
+            if os.path.islink(os.path.join(root, name)):
+                raise ConfigError(f"{directory} holds a symlink, {Path(root) / name}, which this app never writes; "
+                                  "it leaves such a dir alone: pick another dir, or remove the link yourself")
+        found += [(rel_root / name).as_posix() for name in files if not (rel_root == Path(".") and name == MANIFEST)]
+    return sorted(found)
+
+
+def atomic_write_bytes(path: Path, write) -> None:
+    """Call write(file) on a temp file in path's folder, fsync it, then rename it onto path. An OSError
+    (a full disk, no permission) names `path`, so the one error line says where."""
+    path = Path(path)
+    tmp = None
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+        with os.fdopen(fd, "wb") as f:
+            write(f)
+            f.flush()
+            os.fsync(f.fileno())
+        os.chmod(tmp, 0o644)  # mkstemp makes files private; these are ordinary outputs
+        os.replace(tmp, path)
+    except BaseException as exc:
+        if tmp is not None and os.path.exists(tmp):
+            os.unlink(tmp)
+        if isinstance(exc, OSError) and not exc.filename:
+            raise OSError(exc.errno, exc.strerror or str(exc), str(path)) from exc
+        raise
+
+
+def atomic_write_json(path: Path, data: dict) -> None:
+    atomic_write_bytes(path, lambda f: f.write((json.dumps(data, indent=2, default=float) + "\n").encode()))
+
+
+def listed(directory: Path) -> Optional[List[str]]:
+    """The manifest's files, or None when the dir has no (readable) manifest."""
+    try:
+        data = json.loads((Path(directory) / MANIFEST).read_text())
+        return list(data["files"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
+def record(directory: Path) -> None:
+    """Add to the manifest the files of the app's kinds now in `directory` (called as the app writes)."""
     directory = Path(directory)
-    return any((directory / name).exists() for name in RUN_MARKERS) or (
-        (directory / "config.yaml").exists() and (directory / ".hydra").exists())
+    if not directory.is_dir():
+        return
+    files = set(listed(directory) or [])
+    try:
+        files.update(f for f in _files(directory) if OWNED.match(f))
+    except ConfigError:  # a symlink put there by hand: listed files stay as they were
+        pass
+    files = sorted(f for f in files if (directory / f).exists())
+    atomic_write_json(directory / MANIFEST, {"app": "ppo_torchrl", "files": files})
 
 
-def _is_sweep_of_runs(directory: Path) -> bool:
-    return (directory / "multirun.yaml").exists() or any(
-        holds_run(child) for child in directory.iterdir() if child.is_dir())
+def foreign_files(directory: Path) -> List[str]:
+    """The files of `directory` that the app did not write ([] for an app's dir; all of them without a manifest)."""
+    files = _files(directory)
+    ours = listed(directory)
+    if ours is None:
+        return [f for f in files if f != LEGACY_LOCK]
+    ours = set(ours)
+    return [f for f in files if f not in ours and not UNLISTED_OK.match(f)]
+
+
+def _job_dirs(directory: Path) -> List[Path]:
+    return [p for p in sorted(directory.iterdir()) if p.is_dir() and not p.is_symlink() and p.name != STASH]
+
+
+def is_run(directory: Path) -> bool:
+    return (Path(directory) / MANIFEST).is_file()
 
 
 def check_new_dir(directory: Path, overwrite: bool, what: str = "run") -> None:
-    """Refuse a dir that holds a run (or a sweep of runs) unless overwrite; refuse foreign files."""
+    """Refuse a dir that holds a run (or a sweep of runs) unless overwrite; refuse anything else not empty."""
     directory = Path(directory)
+    key = "hydra.run.dir" if what == "run" else "hydra.sweep.dir"
     if directory.exists() and not directory.is_dir():
-        raise ConfigError(f"the {what} dir {directory} is a file; give hydra.run.dir (or hydra.sweep.dir) a directory")
+        raise ConfigError(f"the {what} dir {directory} is a file; give {key} a directory")
     if not directory.is_dir():
         return
-    entries = [p for p in directory.iterdir() if p.name != LOCK]
-    if not entries:
-        return
-    has_run = holds_run(directory) if what == "run" else _is_sweep_of_runs(directory)
-    key = "hydra.run.dir" if what == "run" else "hydra.sweep.dir"
-    if has_run and not overwrite:
+    if not _files(directory) and not _job_dirs(directory):
+        return  # empty (empty folders only): a new run may use it
+    if what == "run":
+        foreign, has_run = foreign_files(directory), is_run(directory)
+    else:  # a sweep: its own files, and job dirs that are each a run dir (or empty)
+        foreign = [f for f in foreign_files(directory) if "/" not in f]
+        for job in _job_dirs(directory):
+            if _files(job):
+                foreign += [f"{job.name}/{f}" for f in foreign_files(job)]
+        has_run = is_run(directory) or any(is_run(job) for job in _job_dirs(directory))
+    if foreign or not has_run:
+        shown = ", ".join(foreign[:3]) + (f" and {len(foreign) - 3} more" if len(foreign) > 3 else "")
+        raise ConfigError(f"{directory} is not empty and is not a ppo_torchrl {what} dir (it holds {shown or 'folders'}, "
+                          f"which this app did not write); pick an empty or new dir with {key}=<dir>")
+    if not overwrite:
         hint = f"continue it with resume={directory}, " if what == "run" else ""
         raise ConfigError(f"{directory} already holds a {what}: {hint}pick a new dir with {key}=<dir>, "
                           "or replace it with overwrite=true")
-    foreign = [p.name for p in entries if (p.name not in RUN_FILES if what == "run" else not p.is_dir())]
-    if foreign and not (what == "sweep" and has_run):
-        raise ConfigError(f"{directory} is not empty and is not a ppo_torchrl {what} dir (it holds {', '.join(sorted(foreign)[:3])}); "
-                          f"pick an empty or new dir with {key}=<dir>")
+
+
+def _holder(directory: Path) -> str:
+    """The pid that holds the dir's lock, from /proc/locks (Linux), or 'another process'."""
+    try:
+        st = os.stat(directory)
+        dev = f"{os.major(st.st_dev):02x}:{os.minor(st.st_dev):02x}:{st.st_ino}"
+        for line in Path("/proc/locks").read_text().splitlines():
+            parts = line.split()
+            if "FLOCK" in parts and parts[-3] == dev:
+                return f"pid {parts[-4]}"
+    except (OSError, IndexError, ValueError):
+        pass
+    return "another process"
 
 
 def lock(directory: Path) -> None:
@@ -68,48 +176,171 @@ def lock(directory: Path) -> None:
         return
     try:
         directory.mkdir(parents=True, exist_ok=True)
-        handle = open(directory / LOCK, "a+")
+        fd = os.open(directory, os.O_RDONLY | os.O_DIRECTORY)
     except OSError as exc:
-        raise ConfigError(f"cannot write the run dir {directory}: {exc.strerror or exc}") from None
+        raise ConfigError(f"cannot write the run dir {directory}: {exc.strerror or exc}; "
+                          "pick a dir you can write with hydra.run.dir=<dir>") from None
     try:
-        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:
-        handle.seek(0)
-        holder = handle.read().strip() or "another process"
-        handle.close()
-        raise ConfigError(f"{directory} is in use by {holder}; wait for it to end or pick another dir") from None
-    handle.seek(0)
-    handle.truncate()
-    handle.write(f"pid {os.getpid()}\n")
-    handle.flush()
-    _held[directory] = handle
-
-
-def remove_run_files(directory: Path) -> None:
-    """overwrite=true: remove the previous run's files (only the names a run writes)."""
-    for name in RUN_FILES:
-        path = Path(directory) / name
-        if path.is_dir():
-            shutil.rmtree(path)
-        elif path.exists():
-            path.unlink()
-
-
-def remove_sweep_runs(directory: Path) -> None:
-    for child in Path(directory).iterdir():
-        if child.is_dir() and (holds_run(child) or (child / ".hydra").exists()):
-            shutil.rmtree(child)
-    remove_run_files(directory)
+        os.close(fd)
+        raise ConfigError(f"{directory} is in use by {_holder(directory)}; wait for it to end or pick another dir") from None
+    except OSError as exc:  # e.g. ENOLCK on a network filesystem without locks
+        os.close(fd)
+        raise EnvironmentFault(f"cannot lock the run dir {directory}: {exc.strerror or exc} (this filesystem has no "
+                               "file locks); put runs on a local disk with hydra.run.dir=<dir>") from None
+    _held[directory] = fd
 
 
 def claim(directory: Path, *, overwrite: bool = False, resume: bool = False, what: str = "run") -> Path:
-    """Check the dir (see the module doc), then lock it; with overwrite, clear the old run once locked."""
+    """Check the dir (see the module doc) and lock it; with overwrite, move the old run aside until `commit`.
+    what="job": a sweep's job dir, checked with its sweep dir; what Hydra wrote there is the job's own."""
     directory = Path(directory).expanduser()
     if directory.resolve() in _held:  # claimed already by this process (before Hydra started)
         return directory
-    if not resume:
-        check_new_dir(directory, overwrite, what)
+    created = _missing_parents(directory)
+    if directory.is_dir():  # in use by another process: say that first, whatever the dir holds
+        lock(directory)
+    try:
+        if not resume and what != "job":
+            check_new_dir(directory, overwrite, what)
+    except ConfigError:
+        release(directory)
+        raise
     lock(directory)
-    if overwrite and not resume:
-        (remove_run_files if what == "run" else remove_sweep_runs)(directory)
+    if resume:
+        return directory
+    stashed = _stash(directory, what) if overwrite else []
+    before = set() if what == "job" else set(_files(directory))
+    _pending[directory.resolve()] = {"what": what, "created": created, "stashed": stashed, "before": before}
     return directory
+
+
+def _missing_parents(directory: Path) -> List[Path]:
+    missing, path = [], directory.resolve()
+    while not path.exists():
+        missing.append(path)
+        path = path.parent
+    return missing
+
+
+def _stash(directory: Path, what: str) -> List[str]:
+    """Move the old run's (or sweep's) listed files into <dir>/.replaced, keeping their paths."""
+    moved = []
+    sources = [directory] + (_job_dirs(directory) if what == "sweep" else [])
+    for source in sources:
+        names = (listed(source) or []) + [f for f in _files(source) if UNLISTED_OK.match(f)]
+        names += [MANIFEST] if (source / MANIFEST).exists() else []
+        prefix = "" if source == directory else f"{source.name}/"
+        for name in dict.fromkeys(names):
+            if not (source / name).exists():
+                continue
+            target = directory / STASH / prefix / name
+            target.parent.mkdir(parents=True, exist_ok=True)
+            os.replace(source / name, target)
+            moved.append(prefix + name)
+    _prune_empty(directory)
+    return moved
+
+
+def _prune_empty(directory: Path) -> None:
+    """Remove the empty folders under `directory` (bottom up), never `directory` itself."""
+    for root, dirs, _ in os.walk(directory, topdown=False):
+        for name in dirs:
+            path = Path(root) / name
+            if not path.is_symlink():
+                try:
+                    path.rmdir()
+                except OSError:
+                    pass
+
+
+def source(path: Path) -> Path:
+    """Where `path` is now: a path into a dir whose old run overwrite=true moved aside (init_from=<that run>)
+    reads the moved files until `commit`."""
+    path = Path(path).expanduser().resolve()
+    for key, state in _pending.items():
+        if state["stashed"] and (path == key or key in path.parents):
+            return key / STASH / path.relative_to(key)
+    return path
+
+
+def commit(directory: Path) -> None:
+    """The new run has started: delete the files it replaced (each listed file, one by one) and list its own."""
+    directory = Path(directory)
+    state = _pending.pop(directory.resolve(), None)
+    if state is not None and state["stashed"]:
+        stash = directory / STASH
+        for name in state["stashed"]:
+            try:
+                (stash / name).unlink()
+            except FileNotFoundError:
+                pass
+        _prune_empty(stash)
+        try:
+            stash.rmdir()
+        except OSError:
+            pass
+    record(directory)
+
+
+def rollback(directory: Optional[Path] = None) -> None:
+    """A claimed dir whose command failed before `commit`: remove what it wrote, put back what it moved."""
+    for key in ([Path(directory).resolve()] if directory is not None else list(_pending)):
+        state = _pending.pop(key, None)
+        if state is None:
+            continue
+        release(key)
+        try:
+            for name in _files(key):
+                if name not in state["before"]:
+                    (key / name).unlink()
+            for name in state["stashed"]:
+                (key / name).parent.mkdir(parents=True, exist_ok=True)
+                os.replace(key / STASH / name, key / name)
+            if (key / STASH).exists():
+                _prune_empty(key / STASH)
+                (key / STASH).rmdir()
+            _prune_empty(key)
+            for path in state["created"]:
+                path.rmdir()
+        except (OSError, ConfigError):
+            pass  # best effort: what is left is named by the next claim's check
+
+
+def finish() -> None:
+    """At the end of a command: a sweep dir whose jobs started is committed; anything else still pending
+    (a run or sweep refused before it started) is rolled back."""
+    for key, state in list(_pending.items()):
+        if state["what"] == "sweep" and any(is_run(job) for job in _job_dirs(key)):
+            commit(key)
+        else:
+            rollback(key)
+
+
+def release(directory: Path) -> None:
+    fd = _held.pop(Path(directory).resolve(), None)
+    if fd is not None:
+        os.close(fd)
+
+
+def unwritable(path: Path) -> Optional[str]:
+    """Why files cannot be written in the folder `path`, or None when they can; leaves the disk as it was."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        return "it is a file"
+    created = _missing_parents(path)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        probe = path / f".ppo_torchrl_probe_{os.getpid()}"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as exc:
+        return exc.strerror or errno.errorcode.get(exc.errno, str(exc))
+    finally:
+        for folder in created:
+            try:
+                folder.rmdir()
+            except OSError:
+                pass
+    return None

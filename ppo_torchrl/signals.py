@@ -3,7 +3,8 @@
 - From process start (`install()`), a signal interrupts whatever runs (an import, env building,
   compile) and the entry point's error path reports it: exit 130 (SIGINT) or 143 (SIGTERM).
 - In the training loop (`StopRequest`), the first signal asks the loop to stop after the current
-  iteration, which then saves a checkpoint; a second one abandons the iteration at once.
+  iteration, which then saves a checkpoint; a second one abandons the iteration at once. The last
+  iteration is no different, and during the final eval (after its checkpoint is saved) one signal stops at once.
 Either way the line is built from `ON_DISK`, which the trainer updates as it saves, so it never
 claims a checkpoint that is not there.
 """
@@ -27,12 +28,17 @@ class OnDisk:
     checkpoint: Optional[Path] = None  # the newest checkpoint this run has on disk
     checkpoint_frames: int = 0
     frames: int = 0  # frames trained so far
+    total_frames: Optional[int] = None  # the run's budget: a checkpoint at it has nothing left to resume
+    started: bool = False  # the run dir holds this run (set up without error and committed)
 
     def describe(self) -> str:
         if self.checkpoint is not None:
-            return (f"the last checkpoint on disk is {self.checkpoint} at frame {self.checkpoint_frames} "
-                    f"(resume with: python -m ppo_torchrl resume={self.run_dir})")
-        again = f"; to start again in {self.run_dir} add overwrite=true" if self.run_dir else ""
+            done = self.total_frames is not None and self.checkpoint_frames >= self.total_frames
+            then = (f"every frame is trained; evaluate it with: python -m ppo_torchrl.evaluate run={self.run_dir}"
+                    if done else f"resume with: python -m ppo_torchrl resume={self.run_dir}")
+            return f"the last checkpoint on disk is {self.checkpoint} at frame {self.checkpoint_frames} ({then})"
+        # a run stopped before it started leaves no dir (rundir.rollback): nothing to overwrite then
+        again = f"; to start again in {self.run_dir} add overwrite=true" if self.run_dir and self.started else ""
         if self.frames:
             return f"nothing was saved: the run had done {self.frames} frames and no checkpoint yet{again}"
         return f"nothing was saved{again}"
@@ -79,6 +85,7 @@ class StopRequest:
 
     def __init__(self):
         self.signum: Optional[int] = None
+        self.at_once = False  # set around work that ends the run anyway (the final eval): no iteration to finish
         self._previous = {}
 
     def __enter__(self) -> "StopRequest":
@@ -88,7 +95,7 @@ class StopRequest:
         return self
 
     def _handle(self, signum, frame) -> None:
-        if self.signum is not None:
+        if self.signum is not None or self.at_once:
             raise Interrupt(signum)
         self.signum = signum
         print(f"{signal.Signals(signum).name}: stopping after this iteration to save a checkpoint "

@@ -21,7 +21,7 @@ import torch
 from omegaconf import OmegaConf
 from tensordict import TensorDict
 
-from ppo_torchrl import checkpoint, startup
+from ppo_torchrl import checkpoint, rundir, startup
 from ppo_torchrl.advantage import explained_variance, make_advantage
 from ppo_torchrl.checkpoint import CheckpointManager, check_spec
 from ppo_torchrl.collectors import make_collector
@@ -62,7 +62,7 @@ class Trainer:
         self.cfg = cfg
         self.run_dir = Path(run_dir)
         self.run_dir.mkdir(parents=True, exist_ok=True)
-        ON_DISK.__init__(run_dir=self.run_dir)  # what this run has saved: nothing yet
+        ON_DISK.__init__(run_dir=self.run_dir, total_frames=startup.frame_budget(cfg)[1])  # what this run has saved: nothing yet
         torch.set_num_threads(cfg.torch_threads)
         self.device = resolve_device(cfg.device)
         seed_everything(cfg.seed)
@@ -137,7 +137,7 @@ class Trainer:
     def _init_from(self, source: str, with_optimizer: bool) -> None:
         """Transfer: weights and normalization stats (and optimizer state) of another run; counters,
         envs and RNG streams start fresh. A run dir gives its best checkpoint."""
-        path = Path(source).expanduser()
+        path = rundir.source(Path(source))  # init_from=<the dir this run overwrites>: its old files
         if path.is_dir():
             path = checkpoint.resolve_checkpoint(path, "best")
         if not path.is_file():
@@ -160,6 +160,8 @@ class Trainer:
         self.metrics = MetricsFile(self.run_dir / "metrics.csv", COLUMNS, append=self.resumed)
         if not self.resumed:  # a resume's overrides reach config.yaml once an iteration has completed
             self.write_config()
+        rundir.commit(self.run_dir)  # set up without error: the run starts, what overwrite=true replaced goes
+        ON_DISK.started = True
         print(startup.describe_resume(self.run_dir, self.frames, cfg) if self.resumed
               else startup.describe_start(cfg, startup.command_line()), file=sys.stderr, flush=True)
         batch_frames = cfg.collector.frames_per_batch
@@ -173,6 +175,14 @@ class Trainer:
         except Interrupt as signal_:  # a second signal: the iteration in flight is abandoned
             self.write_summary(status="interrupted")
             raise Interrupted(f"stopped at once; {ON_DISK.describe()}", signal_.signum) from None
+        except Interrupted:
+            raise
+        except Exception:  # a dead helper process, a full disk, a bug: the summary says the run failed
+            try:
+                self.write_summary(status="failed")
+            except OSError:
+                pass
+            raise
         finally:
             if self.evals is not None:  # rows still waiting are written, without evals not back
                 self.evals.close()
@@ -181,6 +191,7 @@ class Trainer:
             self.collector.close()
             if self.logger is not None:
                 close_logger(self.logger)
+            rundir.record(self.run_dir)
         return self.summary(status="finished")
 
     def _loop(self, stop: StopRequest, batch_frames: int) -> None:
@@ -202,8 +213,11 @@ class Trainer:
             row.update(self._episode_stats())
             if last and self.evals is not None:
                 self.evals.poll(block=True)  # the background evals first: their rows, last_eval and best
-            if last and cfg.eval.final_episodes > 0:
+            if last and cfg.eval.final_episodes > 0 and stop.signum is None:
+                self.save_checkpoint()  # the trained frames are on disk before the final eval, which a signal stops
+                stop.at_once = True
                 row.update(self._evaluate(cfg.eval.final_episodes))
+                stop.at_once = False
             elif not last and self._crossed(cfg.eval.every_frames):
                 row.update(self._evaluate(cfg.eval.episodes, background=self.evals is not None))
             row["time_s"] = self.wall_time()
@@ -211,12 +225,14 @@ class Trainer:
             self._log(row)
             if last or stop.signum is not None or self._crossed(cfg.checkpoint.every_frames):
                 path = self.save_checkpoint(eval_return=row.get("eval/return_mean"))
-            if stop.signum is not None and not last:
+            if stop.signum is not None:
                 if self.evals is not None:  # the evals under way (seconds): their rows as an uninterrupted run has them
                     self.evals.poll(block=True)
                 self.write_summary(status="interrupted")
-                raise Interrupted(f"checkpoint at frame {self.frames} saved to {path} "
-                                  f"(resume with: python -m ppo_torchrl resume={self.run_dir})", stop.signum)
+                then = (f"every frame is trained; the final eval was skipped (run it with: python -m "
+                        f"ppo_torchrl.evaluate run={self.run_dir})" if last
+                        else f"resume with: python -m ppo_torchrl resume={self.run_dir}")
+                raise Interrupted(f"checkpoint at frame {self.frames} saved to {path} ({then})", stop.signum)
             self.write_summary(status="finished" if last else "running")
 
     def _set_lr(self) -> float:
@@ -376,10 +392,11 @@ class Trainer:
     def save_checkpoint(self, eval_return: Optional[float] = None) -> Path:
         path = self.ckpt.save(self.state_dict(), eval_return)
         ON_DISK.checkpoint, ON_DISK.checkpoint_frames = path, self.frames
+        rundir.record(self.run_dir)
         return path
 
     def write_config(self) -> None:
-        checkpoint.atomic_write_bytes(self.run_dir / "config.yaml",
+        rundir.atomic_write_bytes(self.run_dir / "config.yaml",
                                       lambda f: f.write(OmegaConf.to_yaml(self.cfg, resolve=True).encode()))
 
     def summary(self, status: str) -> dict:
@@ -405,7 +422,11 @@ class Trainer:
         }
 
     def write_summary(self, status: str) -> None:
-        checkpoint.atomic_write_json(self.run_dir / "summary.json", self.summary(status))
+        path = self.run_dir / "summary.json"
+        new = not path.exists()
+        rundir.atomic_write_json(path, self.summary(status))
+        if new:
+            rundir.record(self.run_dir)
 
 
 def train(cfg, run_dir: Path, resume: Optional[dict] = None) -> dict:

@@ -8,14 +8,13 @@ once, so a missing dependency or a bad model file fails here and not after hours
 from __future__ import annotations
 
 import importlib.util
-import os
-import sys
 
 from omegaconf import OmegaConf
 
 from ppo_torchrl.errors import ConfigError
 
 SEED_LIMIT = 2**32  # numpy's and gymnasium's seeds are 32-bit
+MAX_TOTAL_FRAMES = 10**12  # a trillion frames is years on any machine: a larger budget is a typo
 COMPILE_CHOICES = ("auto", "true", "false")
 OBS_NORMS = ("running", "fixed", "none")
 REWARD_NORMS = ("return", "scale", "none")
@@ -32,7 +31,6 @@ def validate_config(cfg):
     """Raise ConfigError naming the first bad value; return the env's spec (shapes and bounds)."""
     from ppo_torchrl.advantage import ESTIMATORS
     from ppo_torchrl.collectors import CHOICES, resolve_backend
-    from ppo_torchrl.envs import env_spec
     from ppo_torchrl.eval_worker import BACKGROUND_CHOICES
     from ppo_torchrl.loggers import LOGGERS
     from ppo_torchrl.losses import LOSSES, OPTIMIZERS, NOT_COMPILABLE
@@ -43,6 +41,7 @@ def validate_config(cfg):
         example = " (any registered Gymnasium id: env=gym env.id=Swimmer-v4)" if "env.id" in missing else ""
         raise ConfigError(f"{', '.join(missing)} must be given{example}")
     check_keys_against_schema(cfg)
+    check_finite(cfg)
     c, loss, t, adv, env = cfg.collector, cfg.loss, cfg.env.transforms, cfg.advantage, cfg.env
     compile_choice = str(cfg.compile).lower()
     positive_or_null = lambda v: v is None or v > 0  # noqa: E731
@@ -63,6 +62,7 @@ def validate_config(cfg):
          f"collector.ray_address={c.ray_address} needs collector.distributed=ray"),
         (c.total_frames >= c.frames_per_batch,
          f"collector.total_frames={c.total_frames} must be >= collector.frames_per_batch={c.frames_per_batch}"),
+        (c.total_frames <= MAX_TOTAL_FRAMES, f"collector.total_frames={c.total_frames} must be <= 10^12"),
         one_of("collector.backend", c.backend, CHOICES),
         one_of("compile", compile_choice, COMPILE_CHOICES),
         one_of("eval.background", str(cfg.eval.background).lower(), BACKGROUND_CHOICES),
@@ -108,6 +108,8 @@ def validate_config(cfg):
         one_of("logger", cfg.logger.name, LOGGERS),
         (cfg.torch_threads >= 1, f"torch_threads={cfg.torch_threads} must be >= 1"),
     ]
+    from ppo_torchrl.locomotion import locomotion_checks, terrain_checks
+
     checks += locomotion_checks(env.locomotion) + terrain_checks(env.get("terrain"))
     for ok, message in checks:
         if not ok:
@@ -121,63 +123,43 @@ def validate_config(cfg):
     if c.distributed == "ray" and importlib.util.find_spec("ray") is None:
         raise ConfigError(f"collector.distributed=ray needs Ray, which is not installed: {RAY_INSTALL}")
     validate_policy_config(cfg.policy)
-    return env_spec(cfg.env)
+    return cached_env_spec(cfg.env)
 
 
-def locomotion_checks(loco) -> list:
-    """env.locomotion: limits > 0, gains and weights >= 0 (the reward terms subtract costs, add air time)."""
-    def positive(key):
-        value = loco.get(key)
-        return value is None or value > 0, f"env.locomotion.{key}={value} must be > 0 (or null: as the model has it)"
-
-    def non_negative(key):
-        value = loco.get(key)
-        return value is None or value >= 0, f"env.locomotion.{key}={value} must be >= 0"
-
-    weights = [k for k in loco if str(k).endswith("_weight") and k not in ("forward_reward_weight", "healthy_reward")]
-    return ([positive(k) for k in ("target_speed", "torque_limit", "joint_speed_limit", "base_height_target")]
-            + [non_negative(k) for k in ("kp", "kd", "armature", "feet_air_time_target", *weights)])
+_specs: dict = {}
 
 
-def terrain_checks(terrain) -> list:
-    """env.terrain: heights >= 0, [min, max] ranges with min <= max, a threshold in (0, 1], counts >= 1."""
-    if terrain is None:
-        return []
+def cached_env_spec(env_cfg):
+    """The env's spec, built once per env config in a process (a sweep's jobs share it; the trainer's
+    second validation of the same config builds nothing)."""
+    from ppo_torchrl.envs import env_spec
 
-    def span(key, low_ok):
-        value = terrain.get(key)
-        if value is None:
-            return True, ""
-        value = list(value)
-        ok = len(value) == 2 and low_ok(value[0]) and value[0] <= value[1]
-        floor = "0 <= min" if key == "step_height_range" else "0 < min"
-        return ok, f"env.terrain.{key}={value} must be [min, max] with {floor} <= max (m)"
+    key = OmegaConf.to_yaml(env_cfg, resolve=True)
+    if key not in _specs:
+        _specs[key] = env_spec(env_cfg)
+    return _specs[key]
 
-    height, eval_height = terrain.get("step_height"), terrain.get("eval_step_height")
-    return [
-        (height is None or height >= 0, f"env.terrain.step_height={height} must be >= 0 (m)"),
-        (eval_height is None or eval_height >= 0, f"env.terrain.eval_step_height={eval_height} must be >= 0 (m)"),
-        span("step_height_range", lambda low: low >= 0),
-        span("step_distance", lambda low: low > 0),
-        (0 < terrain.curriculum_threshold <= 1,
-         f"env.terrain.curriculum_threshold={terrain.curriculum_threshold} must be in (0, 1]: a success rate"),
-        (terrain.curriculum_window >= 1, f"env.terrain.curriculum_window={terrain.curriculum_window} must be >= 1"),
-        (terrain.curriculum_step > 0, f"env.terrain.curriculum_step={terrain.curriculum_step} must be > 0 (m)"),
-        (terrain.curriculum_down_threshold is None or 0 <= terrain.curriculum_down_threshold < terrain.curriculum_threshold,
-         f"env.terrain.curriculum_down_threshold={terrain.curriculum_down_threshold} must be in "
-         f"[0, curriculum_threshold={terrain.curriculum_threshold}): a success rate"),
-        (terrain.get("curriculum_band") is None or terrain.curriculum_band > 0,
-         f"env.terrain.curriculum_band={terrain.get('curriculum_band')} must be > 0 (m) or null"),
-        (0 <= terrain.curriculum_band_share <= 1,
-         f"env.terrain.curriculum_band_share={terrain.curriculum_band_share} must be in [0, 1]: a share of episodes"),
-        (0 <= terrain.flat_share <= 1, f"env.terrain.flat_share={terrain.flat_share} must be in [0, 1]: a share of episodes"),
-        (not terrain.curriculum or terrain.step_height_range is not None,
-         "env.terrain.curriculum=true needs env.terrain.step_height_range=[min, max] to widen"),
-        (terrain.success_margin >= 0, f"env.terrain.success_margin={terrain.success_margin} must be >= 0 (m)"),
-        (terrain.height_samples >= 0, f"env.terrain.height_samples={terrain.height_samples} must be >= 0"),
-        (terrain.height_sample_spacing > 0,
-         f"env.terrain.height_sample_spacing={terrain.height_sample_spacing} must be > 0 (m)"),
-    ]
+
+def check_finite(cfg) -> None:
+    """NaN nowhere; infinity only in a range or in the env's own make_kwargs (`optim.lr=inf` stopped at the
+    first update before)."""
+    import math
+
+    def walk(node, path):
+        if isinstance(node, dict):
+            for key, value in node.items():
+                walk(value, f"{path}{key}.")
+        elif isinstance(node, list):
+            for value in node:
+                walk(value, path)
+        elif isinstance(node, float) and not math.isfinite(node):
+            key = path.rstrip(".")
+            if math.isnan(node) or not ("range" in key or key.startswith("env.make_kwargs")):
+                raise ConfigError(f"{key}={node} must be a finite number")
+
+    data = OmegaConf.to_container(cfg, resolve=True)
+    data.pop("hydra", None)
+    walk(data, "")
 
 
 def check_frames_left(run_dir, frames_done: int, total_frames: int) -> None:
@@ -185,14 +167,6 @@ def check_frames_left(run_dir, frames_done: int, total_frames: int) -> None:
     if frames_done >= total_frames:
         raise ConfigError(f"resume={run_dir}: the run has done {frames_done} frames already, collector.total_frames="
                           f"{total_frames} leaves nothing to do; give a larger collector.total_frames")
-
-
-def warn_if_oversubscribed(collector_cfg) -> None:
-    """More local worker processes than cores runs, only slower: one line on stderr, once per run."""
-    cores = os.cpu_count() or 1
-    if collector_cfg.workers > cores and not collector_cfg.ray_address:
-        print(f"warning: collector.workers={collector_cfg.workers} is more than this machine's {cores} cores; "
-              "the workers will share them (and run no faster than with fewer)", file=sys.stderr, flush=True)
 
 
 def resolve_device(name: str):

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 import torch
 
-from ppo_torchrl import checkpoint
+from ppo_torchrl import checkpoint, rundir
 from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.trainer import Trainer
 
@@ -46,7 +46,7 @@ def test_atomic_write_leaves_the_old_file_when_the_writer_fails(tmp_path):
         raise KeyboardInterrupt
 
     with pytest.raises(KeyboardInterrupt):
-        checkpoint.atomic_write_bytes(path, broken)
+        rundir.atomic_write_bytes(path, broken)
     assert checkpoint.load(path)["frames"] == 1
     assert [p.name for p in tmp_path.iterdir()] == ["last.pt"]  # no temp file left behind
 

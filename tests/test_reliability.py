@@ -52,7 +52,7 @@ def test_interrupted_and_resumed_run_matches_an_uninterrupted_one(tiny_cfg, tmp_
 
     state = checkpoint.load(tmp_path / "cut" / "checkpoints" / "last.pt")
     assert state["frames"] == 512 and state["iteration"] == 2
-    cfg = resume_config(tmp_path / "cut", [])
+    cfg = resume_config(tmp_path / "cut", [], checkpoint.load(tmp_path / "cut" / "checkpoints" / "last.pt"))
     Trainer(cfg, tmp_path / "cut", resume=state).train()
 
     straight, resumed = metric_rows(tmp_path / "straight"), metric_rows(tmp_path / "cut")
@@ -66,7 +66,7 @@ def test_resume_with_more_frames_and_stale_rows_are_dropped(tiny_cfg, tmp_path):
     Trainer(tiny_cfg("collector.total_frames=512"), tmp_path).train()
     with open(tmp_path / "metrics.csv", "a") as f:  # a row logged after the last checkpoint
         f.write("3,768" + "," * 23 + "\n")
-    cfg = resume_config(tmp_path, ["collector.total_frames=1024"])
+    cfg = resume_config(tmp_path, ["collector.total_frames=1024"], checkpoint.load(tmp_path / "checkpoints" / "last.pt"))
     summary = Trainer(cfg, tmp_path, resume=checkpoint.load(tmp_path / "checkpoints" / "last.pt")).train()
     assert summary["frames"] == 1024
     frames = [int(r.split(",")[1]) for r in (tmp_path / "metrics.csv").read_text().splitlines()[1:]]
@@ -95,15 +95,16 @@ def test_non_finite_loss_stops_with_a_clear_error_and_keeps_the_good_checkpoint(
 
 def test_resume_into_an_env_of_other_shapes_is_refused(tiny_cfg, tmp_path):
     Trainer(tiny_cfg(), tmp_path).train()
-    cfg = resume_config(tmp_path, ["env.id=Hopper-v4", "collector.total_frames=1024"])
+    cfg = resume_config(tmp_path, ["env.id=Hopper-v4", "collector.total_frames=1024"],
+                        checkpoint.load(tmp_path / "checkpoints" / "last.pt"))
     with pytest.raises(ConfigError, match="observations of size 4 .* Hopper-v4 has 11"):
         Trainer(cfg, tmp_path, resume=checkpoint.load(tmp_path / "checkpoints" / "last.pt"))
 
 
 def test_resume_refuses_group_swaps(tmp_path):
-    (tmp_path / "config.yaml").write_text("env:\n  id: InvertedPendulum-v4\n")
+    state = {"config": {"env": {"id": "InvertedPendulum-v4"}}}
     with pytest.raises(ConfigError, match="only key=value overrides"):
-        resume_config(tmp_path, ["loss=kl_ppo"])
+        resume_config(tmp_path, ["loss=kl_ppo"], state)
 
 
 @pytest.mark.parametrize(

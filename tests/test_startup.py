@@ -36,8 +36,10 @@ def test_start_line_of_an_exact_budget_and_the_defaults():
     assert line == "start: InvertedPendulum-v4, 2 batches x 2048 = 4,096 frames; the env file/preset changes no defaults"
 
 
+SAVED = {"config": {"env": {"id": "InvertedPendulum-v4"}}}  # what a checkpoint holds of its config
+
+
 def saved_run(tmp_path):
-    (tmp_path / "config.yaml").write_text("env:\n  id: InvertedPendulum-v4\n")
     (tmp_path / ".hydra").mkdir()
     (tmp_path / ".hydra" / "hydra.yaml").write_text(
         "hydra:\n  runtime:\n    choices:\n      experiment: null\n      logger: csv\n      env: InvertedPendulum-v4\n")
@@ -45,14 +47,14 @@ def saved_run(tmp_path):
 
 
 def test_resume_accepts_the_runs_own_group_choices(tmp_path):
-    cfg = resume_config(saved_run(tmp_path), ["logger=csv", "env=InvertedPendulum-v4", "collector.total_frames=99"])
+    cfg = resume_config(saved_run(tmp_path), ["logger=csv", "env=InvertedPendulum-v4", "collector.total_frames=99"], SAVED)
     assert cfg.collector.total_frames == 99 and cfg.logger.name == "csv"
 
 
 @pytest.mark.parametrize("override, saved", [("logger=none", "logger=csv"), ("experiment=aidl_anymal", "experiment=null")])
 def test_resume_refuses_another_group_choice_naming_the_saved_one(tmp_path, override, saved):
     with pytest.raises(ConfigError, match=f"resume: {override} differs from the run's {saved}"):
-        resume_config(saved_run(tmp_path), [override])
+        resume_config(saved_run(tmp_path), [override], SAVED)
 
 
 def test_resumed_run_says_where_it_resumes_and_its_time_goes_on(tiny_cfg, tmp_path, capsys):
@@ -64,7 +66,7 @@ def test_resumed_run_says_where_it_resumes_and_its_time_goes_on(tiny_cfg, tmp_pa
     state = checkpoint.load(tmp_path / "checkpoints" / "last.pt")
     assert state["wall_time"] >= 1.0
 
-    cfg = resume_config(tmp_path, ["collector.total_frames=1000"])
+    cfg = resume_config(tmp_path, ["collector.total_frames=1000"], state)
     summary = Trainer(cfg, tmp_path, resume=state).train()
     assert capsys.readouterr().err.splitlines()[0] == f"resumed {tmp_path} at frame 512 of 1,024"
     times = [float(row.split(",")[2]) for row in (tmp_path / "metrics.csv").read_text().splitlines()[1:]]

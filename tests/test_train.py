@@ -188,3 +188,18 @@ def test_background_eval_writes_what_the_in_line_eval_writes(tiny_cfg, tmp_path)
     assert tables["true"] == tables["false"]
     assert (tmp_path / "true" / "checkpoints" / "best.pt").is_file()
     assert not multiprocessing.active_children()
+
+
+def test_evals_and_the_logger_do_not_change_training(tiny_cfg, tmp_path):
+    """The same seed and config train the same whatever eval.every_frames (in line or in a second process)
+    or the logger: evals and logging draw from no training random stream."""
+    tables = {}
+    runs = {"plain": [], "evals": ["eval.every_frames=256", "eval.episodes=2"],
+            "background": ["eval.every_frames=256", "eval.episodes=2", "eval.background=true"], "csv": ["logger=csv"]}
+    for name, extra in runs.items():
+        Trainer(tiny_cfg("seed=5", "collector.total_frames=1024", *extra), tmp_path / name).train()
+        with open(tmp_path / name / "metrics.csv") as f:
+            tables[name] = [{k: v for k, v in row.items() if not k.startswith("eval/") and k not in ("time_s", "sps")}
+                            for row in csv.DictReader(f)]
+    assert len(tables["plain"]) == 4
+    assert tables["evals"] == tables["plain"] and tables["background"] == tables["plain"] and tables["csv"] == tables["plain"]

@@ -20,7 +20,8 @@ from ppo_torchrl.collectors import make_collector
 from ppo_torchrl.collectors.multiprocess import pool
 from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.trainer import Trainer
-from ppo_torchrl.validation import validate_config, warn_if_oversubscribed
+from ppo_torchrl.collectors.multiprocess import warn_if_oversubscribed
+from ppo_torchrl.validation import validate_config
 
 def descendants(pid: int) -> list:
     """Process ids under `pid` (`pgrep -P`, recursively)."""
@@ -105,7 +106,7 @@ def test_a_workers_run_checkpoints_evaluates_exports_and_resumes(tiny_cfg, tmp_p
 
     state = load(tmp_path / "checkpoints" / "last.pt")
     assert state["normalization"]["vecnorm"] is not None and state["normalization"]["return"] is not None
-    resumed = Trainer(resume_config(tmp_path, ["collector.total_frames=768"]), tmp_path, resume=state)
+    resumed = Trainer(resume_config(tmp_path, ["collector.total_frames=768"], state), tmp_path, resume=state)
     assert resumed.collector.obs_stats()["count"] == state["normalization"]["obs"]["count"]
     assert resumed.train()["frames"] == 768
 

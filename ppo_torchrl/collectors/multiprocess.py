@@ -19,6 +19,7 @@ new frames. Each env's running discounted return stays in its worker.
 from __future__ import annotations
 
 import functools
+import os
 import signal
 import socket
 import sys
@@ -32,7 +33,7 @@ from torchrl.envs import ObservationNorm, VecNormV2
 
 from ppo_torchrl.collectors.torchrl_collector import TorchRLCollector
 from ppo_torchrl.envs import make_torchrl_env, torchrl_obs_stats
-from ppo_torchrl.errors import ConfigError
+from ppo_torchrl.errors import ConfigError, EnvironmentFault
 from ppo_torchrl.models import ActorCritic
 from ppo_torchrl.normalization import ReturnNormalization
 
@@ -95,8 +96,6 @@ class MultiProcessCollector(TorchRLCollector):
     RESUMES_EPISODES = False  # the envs live in the workers: a resume starts new episodes there
 
     def __init__(self, cfg, ac: ActorCritic, seed: int, device: torch.device):
-        from ppo_torchrl.validation import warn_if_oversubscribed
-
         c, t = cfg.collector, cfg.env.transforms
         warn_if_oversubscribed(c)
         env_kwargs = dict(clip_actions=ac.head == "normal", gamma=cfg.advantage.gamma)
@@ -110,7 +109,13 @@ class MultiProcessCollector(TorchRLCollector):
                                      num_envs=c.num_envs, obs_stats=fixed, **env_kwargs)
         self.workers = c.workers
         self.started_ray = c.distributed == "ray" and not c.ray_address and not is_ray_running()
-        self.collector = self._make(c, [make_env] * c.workers, ac, device)
+        # Workers start with SIGINT blocked (inherited): a Ctrl-C while they import is the main process's
+        # alone (one line), not a traceback from each worker; here it waits until they have started.
+        blocked = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        try:
+            self.collector = self._make(c, [make_env] * c.workers, ac, device)
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
         self.collector.set_seed(seed)
         self._base = None  # the merged moments the workers started the batch from (None: nothing seen)
         self._start(c.workers * c.num_envs)
@@ -129,10 +134,25 @@ class MultiProcessCollector(TorchRLCollector):
         return (module for module in self.env.transform.modules() if isinstance(module, kind))
 
     def collect(self) -> TensorDict:
-        self.collector.update_policy_weights_()  # every worker collects with the weights of the last update
-        batch = super().collect()
-        self._merge_stats()
+        try:
+            self.collector.update_policy_weights_()  # every worker collects with the weights of the last update
+            batch = super().collect()
+            self._merge_stats()
+        except Exception:
+            self._raise_if_a_worker_died()
+            raise
         return batch
+
+    def _raise_if_a_worker_died(self) -> None:
+        """A worker killed (kill -9, out of memory) is one line naming it and what is on disk, not TorchRL's error."""
+        from ppo_torchrl.signals import ON_DISK
+
+        dead = [(i, p) for i, p in enumerate(getattr(self.collector, "procs", []) or []) if not p.is_alive()]
+        if dead:  # the one a signal killed first (the others may have been shut down after it)
+            i, proc = min(dead, key=lambda d: (d[1].exitcode or 0) >= 0)
+            code = proc.exitcode or 0
+            how = f"killed by {signal.Signals(-code).name}" if code < 0 else f"exit code {code}"
+            raise EnvironmentFault(f"collector worker {i} (pid {proc.pid}) died ({how}); {ON_DISK.describe()}") from None
 
     # ---------------------------------------------------------------- statistics
     def _stat_keys(self) -> dict:
@@ -194,6 +214,14 @@ class MultiProcessCollector(TorchRLCollector):
             import ray
 
             ray.shutdown()
+
+
+def warn_if_oversubscribed(collector_cfg) -> None:
+    """More local worker processes than cores runs, only slower: one line on stderr, once per run."""
+    cores = os.cpu_count() or 1
+    if collector_cfg.workers > cores and not collector_cfg.ray_address:
+        print(f"warning: collector.workers={collector_cfg.workers} is more than this machine's {cores} cores; "
+              "the workers will share them (and run no faster than with fewer)", file=sys.stderr, flush=True)
 
 
 def check_reachable(address: Optional[str], timeout_s: float = 5.0) -> None:
