@@ -19,7 +19,7 @@ import torch
 from torch import nn
 
 from ppo_torchrl.errors import ConfigError
-from ppo_torchrl.models import ActorCritic
+from ppo_torchrl.models import ActorCritic, to_bounds
 from ppo_torchrl.normalization import obs_scale
 
 
@@ -33,20 +33,19 @@ class DeployedPolicy(nn.Module):
         obs_dim = ac.policy_net[0][0].in_features
         mean = np.zeros(obs_dim) if obs_stats is None else np.asarray(obs_stats["mean"])
         std = np.ones(obs_dim) if obs_stats is None else obs_scale(obs_stats["var"], epsilon)
-        self.register_buffer("obs_mean", torch.as_tensor(mean, dtype=torch.float32))
-        self.register_buffer("obs_std", torch.as_tensor(std, dtype=torch.float32))
+        # float64, as the eval env normalizes (ObservationNorm on the float64 observation, then DoubleToFloat):
+        # `evaluate` and this module then feed the network the same float32 values and act alike, bit for bit
+        self.register_buffer("obs_mean", torch.as_tensor(mean, dtype=torch.float64))
+        self.register_buffer("obs_std", torch.as_tensor(std, dtype=torch.float64))
         clip = float(obs_clip) if obs_stats is not None and obs_clip is not None else float("inf")
-        self.register_buffer("obs_clip", torch.tensor(clip))
+        self.register_buffer("obs_clip", torch.tensor(clip, dtype=torch.float64))
         self.register_buffer("low", ac.action_low.float().cpu())
         self.register_buffer("high", ac.action_high.float().cpu())
         self.squash = ac.head == "tanh_normal"
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        x = ((obs - self.obs_mean) / self.obs_std).clamp(-self.obs_clip, self.obs_clip)
-        loc = self.policy_net(x)[0]
-        if self.squash:
-            return (self.high + self.low) / 2 + (self.high - self.low) / 2 * torch.tanh(loc)
-        return torch.maximum(torch.minimum(loc, self.high), self.low)
+        x = ((obs.double() - self.obs_mean) / self.obs_std).clamp(-self.obs_clip, self.obs_clip).float()
+        return to_bounds(self.policy_net(x)[0], self.low, self.high, self.squash)
 
 
 def export_policy(cfg, ac: ActorCritic, obs_stats: Optional[dict], path: Path) -> Path:

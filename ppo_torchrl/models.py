@@ -18,7 +18,6 @@ from tensordict.nn import TensorDictModule
 from torch import nn
 from torchrl.data import Bounded
 from torchrl.modules import ActorValueOperator, IndependentNormal, ProbabilisticActor, TanhNormal, ValueOperator
-from torchrl.modules.distributions.utils import safetanh_noeps
 
 from ppo_torchrl.envs import EnvSpec
 from ppo_torchrl.errors import ConfigError
@@ -210,11 +209,20 @@ class NumpyPolicy:
         return base, np.minimum(np.maximum(base, self.low), self.high)
 
 
+def to_bounds(loc: torch.Tensor, low: torch.Tensor, high: torch.Tensor, squash: bool) -> torch.Tensor:
+    """The one map from the policy mean to an action in [low, high]: TanhNormal's squash or the Normal head's
+    clip. `evaluate` and an exported policy.pt both take it. The squash is the forward pass of TorchRL's
+    `safetanh_noeps` (tanh clamped 1 - resolution inside the bounds) as plain tensor ops, which TorchScript
+    can export (its autograd.Function cannot); tests/test_models.py checks it against TorchRL's TanhNormal."""
+    if squash:
+        limit = 1.0 - torch.finfo(loc.dtype).resolution
+        return (high + low) / 2 + (high - low) / 2 * loc.tanh().clamp(-limit, limit)
+    return torch.maximum(torch.minimum(loc, high), low)
+
+
 def deterministic_action(ac: ActorCritic, loc: torch.Tensor) -> torch.Tensor:
     """The action a deterministic evaluation takes: the mean, squashed or clipped to the bounds."""
-    if ac.head == "tanh_normal":
-        return (ac.action_high + ac.action_low) / 2 + (ac.action_high - ac.action_low) / 2 * safetanh_noeps(loc)
-    return torch.maximum(torch.minimum(loc, ac.action_high), ac.action_low)
+    return to_bounds(loc, ac.action_low, ac.action_high, ac.head == "tanh_normal")
 
 
 class _DeterministicHead(nn.Module):

@@ -125,3 +125,29 @@ def test_deterministic_policy_is_the_actor_in_deterministic_mode(head):
         assert ((theirs < low) | (theirs > high)).any()
         theirs = torch.maximum(torch.minimum(theirs, high), low)
     assert torch.equal(ours, theirs)
+
+
+def test_evaluate_and_the_exported_policy_act_alike_to_the_bit(tmp_path):
+    """One map from mean to action (models.to_bounds) and one normalization arithmetic (float64, as the eval
+    env's ObservationNorm): on 1,000 observations, most of them saturating the bounds, the same actions."""
+    from ppo_torchrl.envs import env_spec, make_torchrl_env
+    from ppo_torchrl.export import export_policy
+
+    cfg = compose_config(["env=Hopper-v4"])
+    spec = env_spec(cfg.env)
+    torch.manual_seed(0)
+    ac = make_actor_critic(cfg.policy, spec)
+    with torch.no_grad():  # a large last layer: most actions at the bounds
+        [m for m in ac.policy_net.modules() if isinstance(m, torch.nn.Linear)][-1].weight.mul_(500.0)
+    rng = np.random.default_rng(0)
+    stats = {"mean": rng.normal(size=spec.obs_dim), "var": rng.uniform(0.01, 4, size=spec.obs_dim), "count": 100.0}
+    obs = torch.as_tensor(rng.normal(scale=5, size=(1000, spec.obs_dim)))
+    td = TensorDict({"observation": obs}, [1000])
+    env = make_torchrl_env(cfg.env, clip_actions=False, gamma=0.99, obs_stats=stats, train=False)
+    for transform in env.transform:  # the eval env's observation path: frozen norm, clip, to float32
+        if "observation" in transform.in_keys:
+            td = transform(td)
+    evaluated = deterministic_policy(ac)(td)["action"]
+    exported = torch.jit.load(str(export_policy(cfg, ac, stats, tmp_path / "policy.pt")))(obs)
+    assert (evaluated.abs() > 0.999).float().mean() > 0.5
+    assert torch.equal(evaluated, exported)
