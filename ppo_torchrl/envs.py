@@ -195,8 +195,26 @@ def gym_make_kwargs(env_cfg, render_mode: Optional[str] = None, evaluation: bool
     if env_cfg.max_episode_steps is not None:
         kwargs["max_episode_steps"] = env_cfg.max_episode_steps
     if render_mode is not None:
+        if not env_cfg.get("xml_file") and not {"camera_id", "camera_name", "default_camera_config"} & kwargs.keys():
+            kwargs.update(tracking_camera(env_cfg.id))
         kwargs.update(render_mode=render_mode, **render_kwargs)
     return kwargs
+
+
+def tracking_camera(env_id: str) -> dict:
+    """The gym.make kwargs of a video that follows the robot. Gymnasium's MuJoCo models carry a `track` camera
+    on the torso in trackcom mode (Hopper, Walker2d, HalfCheetah, Ant, Humanoid), but Gymnasium 1.x renders from
+    a free camera that stays where the episode began unless the camera is named. A MuJoCo env without one falls
+    back to that free camera; other envs take no camera. (MJCF robots: locomotion.py adds `track` when missing.)"""
+    from gymnasium.envs.registration import load_env_creator
+
+    try:
+        from gymnasium.envs.mujoco.mujoco_env import MujocoEnv
+    except ImportError:  # no mujoco: no MuJoCo env to film
+        return {}
+    entry = gym.spec(env_id).entry_point
+    creator = load_env_creator(entry) if isinstance(entry, str) else entry
+    return {"camera_name": TRACKING_CAMERA} if isinstance(creator, type) and issubclass(creator, MujocoEnv) else {}
 
 
 def make_gym_env(env_cfg, render_mode: Optional[str] = None, evaluation: bool = False, **render_kwargs) -> gym.Env:

@@ -8,15 +8,18 @@ or clipped to the bounds). It shares no state with the training envs.
         [heights=0,0.05,0.1,0.15,0.2 [out=<dir>]] [env.terrain.step_height=0.15 ...]
 
 prints mean +- std return and length (MJCF robots: forward velocity along the heading and gait
-figures; step envs: the share of episodes that cross), writes <run dir>/eval/eval.json and, with
-video=true, an mp4 of the first episode (headless: MUJOCO_GL=egl). `env.<key>=<value>` changes the
+figures, each foot's too; step envs: the share of episodes that cross and are not terminated, beside
+the share beyond the line at the end), writes <run dir>/eval/eval.json (with a record per episode) and, with
+video=true, an mp4 of the first episode (or those of video_episodes=, up to video_length= seconds)
+from a camera that follows the robot, at real-time speed (headless: MUJOCO_GL=egl). `env.<key>=<value>` changes the
 run's env config for this evaluation; `heights=` evaluates at each step height and writes
-height_sweep.csv and the success-rate curve height_sweep.png.
+height_sweep.csv, the success-rate curve height_sweep.png, height_sweep_episodes.csv and height_sweep.json.
 """
 
 from __future__ import annotations
 
 import copy
+import itertools
 import math
 import sys
 import time
@@ -29,10 +32,13 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type
 
 from ppo_torchrl.envs import env_label, episode_seeds, make_torchrl_env
 from ppo_torchrl.errors import ConfigError
-from ppo_torchrl.locomotion import LocomotionEnv
+from ppo_torchrl.locomotion import FOOT_PAIRS, LocomotionEnv
 from ppo_torchrl.models import ActorCritic, deterministic_policy
 
+# Videos play in real time: one frame per control step when the control rate is at most VIDEO_MAX_FPS,
+# else every k-th step, k = round(rate / VIDEO_FPS), written at rate / k fps.
 VIDEO_FPS = 30
+VIDEO_MAX_FPS = 60
 VIDEO_SIZE = (480, 360)
 QUIET_S = 5.0  # progress=None (training's evals): no line unless the eval is still running after this
 EVERY_S = 10.0  # off a terminal, a plain progress line at most this often
@@ -40,14 +46,16 @@ EVERY_S = 10.0  # off a terminal, a plain progress line at most this often
 
 class EpisodeProgress:
     """`eval: 3/10 episodes, 12 s elapsed, ETA 28 s` on stderr after an episode: on a terminal an
-    updating line, erased when the eval ends; otherwise a plain line at most every EVERY_S seconds."""
+    updating line, erased when the eval ends; otherwise a plain line at most every EVERY_S seconds.
+    The ETA leaves filming out of the time per episode: film_s, the time spent rendering so far, counts
+    once; film_left_s, the filming still to come (Filming.left_s), is added."""
 
     def __init__(self, total: int, progress: Optional[bool], tty: Optional[bool] = None):
         self.total, self.start, self.last, self.shown = total, time.perf_counter(), -math.inf, False
         self.quiet_s = math.inf if progress is False else 0.0 if progress else QUIET_S
         self.tty = sys.stderr.isatty() if tty is None else tty
 
-    def update(self, done: int) -> None:
+    def update(self, done: int, film_s: float = 0.0, film_left_s: float = 0.0) -> None:
         now = time.perf_counter()
         elapsed = now - self.start
         if self.tty and done == self.total:
@@ -56,22 +64,103 @@ class EpisodeProgress:
             return
         if elapsed < self.quiet_s or (not self.tty and now - self.last < EVERY_S):
             return
-        eta = elapsed / done * (self.total - done)
+        eta = max(elapsed - film_s, 0.0) / done * (self.total - done) + film_left_s
         line = f"eval: {done}/{self.total} episodes, {elapsed:.0f} s elapsed, ETA {eta:.0f} s"
         print("\r" + line if self.tty else line, end="" if self.tty else "\n", file=sys.stderr, flush=True)
         self.last, self.shown = now, True
 
 
+class Filming:
+    """Films episodes `which` (indices into run_episodes' seeds) of `env`, a Gymnasium env made with
+    render_mode="rgb_array", into one mp4 at real-time speed: a frame per `every` control steps (VIDEO_*
+    above), written at fps = control rate / every; at most `length_s` seconds of video. An episode of
+    n steps shows the states after steps 0 (the reset) .. n-1, the frame of each run of `every` steps
+    taken at its middle: round(n / every) frames, so its duration is n * dt within every / 2 steps."""
+
+    def __init__(self, path: Path, env, which: Sequence[int], length_s: Optional[float] = None):
+        unwrapped = env.unwrapped
+        dt = getattr(unwrapped, "dt", None) or 1.0 / unwrapped.metadata.get("render_fps", VIDEO_FPS)
+        rate = 1.0 / dt  # control steps per simulated second
+        self.every = 1 if rate <= VIDEO_MAX_FPS else max(1, round(rate / VIDEO_FPS))
+        self.fps = rate / self.every
+        self.path, self.env, self.which = path, env, sorted(set(which))
+        self.max_frames = math.inf if length_s is None else max(1, round(length_s * self.fps))
+        self.frames, self.spent_s, self.filmed, self._writer = 0, 0.0, [], None
+
+    def start(self, episode: int):
+        """Right after episode `episode`'s reset: the rollout callback that films it (torchrl calls it after
+        each step but the last), the reset being step 0; None when this episode is not filmed."""
+        if episode not in self.which or self.frames >= self.max_frames:
+            return None
+        self.filmed.append(episode)
+        steps = itertools.count(0)
+
+        def callback(*_):
+            if next(steps) % self.every == self.every // 2 and self.frames < self.max_frames:
+                self._take()
+        callback()
+        return callback
+
+    def _take(self) -> None:
+        start = time.perf_counter()
+        try:
+            frame = self.env.render()
+        except Exception as exc:
+            if self.frames:
+                raise
+            raise ConfigError(f"rendering is unavailable here ({type(exc).__name__}: {str(exc).splitlines()[0]}); "
+                              "set MUJOCO_GL=egl (or osmesa) or run with video=false") from exc
+        if self._writer is None:
+            import imageio.v2 as imageio
+
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._writer = imageio.get_writer(self.path, fps=self.fps, macro_block_size=8)
+        self._writer.append_data(frame)
+        self.frames += 1
+        self.spent_s += time.perf_counter() - start
+
+    def left_s(self, done: int, lengths: Sequence[int]) -> float:
+        """The filming still to come after `done` episodes: at this video's cost per frame so far, the
+        episodes left to film, each as long as the mean episode so far (within the length cap)."""
+        if not self.frames or not lengths:
+            return 0.0
+        left = sum(e >= done for e in self.which) * math.ceil(np.mean(lengths) / self.every)
+        return self.spent_s / self.frames * min(left, self.max_frames - self.frames)
+
+    def close(self) -> Optional[dict]:
+        """Finish the mp4; what it holds (None when no frame was taken)."""
+        if self._writer is None:
+            return None
+        self._writer.close()
+        self._writer = None
+        return {"path": str(self.path), "episodes": self.filmed, "frames": self.frames, "fps": self.fps,
+                "every": self.every, "seconds": self.frames / self.fps}
+
+
+def video_line(video: dict) -> str:
+    """'video: <path> (episode 0: 8.0 s at 31.25 fps, a frame per 4 control steps of 125 Hz: real time)'."""
+    every = f"a frame per {video['every']} control steps of" if video["every"] > 1 else "a frame per control step,"
+    return (f"video: {video['path']} (episode{'s' * (len(video['episodes']) > 1)} "
+            f"{','.join(map(str, video['episodes']))}: {video['seconds']:.1f} s at {video['fps']:.4g} fps, "
+            f"{every} {video['fps'] * video['every']:.4g} Hz: real time)")
+
+
 def evaluate_policy(cfg, ac: ActorCritic, obs_stats: Optional[dict], episodes: int, seed: int,
                     deterministic: bool = True, video_path: Optional[Path] = None,
-                    progress: Optional[bool] = None) -> dict:
-    """Run `episodes` episodes; with video_path, the first one is also written as an mp4.
+                    progress: Optional[bool] = None, video_episodes: Sequence[int] = (0,),
+                    video_length: Optional[float] = None) -> dict:
+    """Run `episodes` episodes; with video_path, episodes `video_episodes` (the first by default) are
+    also written as one mp4 (Filming), at most `video_length` seconds; result["video"] says what it holds.
 
     progress: True reports each episode on stderr (EpisodeProgress), False never, None only once the
     eval has run for QUIET_S seconds (so short evals during training stay silent).
     """
-    return summarize(cfg, run_episodes(cfg, ac, obs_stats, episode_seeds(seed, episodes), deterministic,
-                                       video_path, progress))
+    record = run_episodes(cfg, ac, obs_stats, episode_seeds(seed, episodes), deterministic, video_path, progress,
+                          video_episodes, video_length)
+    result = summarize(cfg, record)
+    if record.get("video"):
+        result["video"] = record["video"]
+    return result
 
 
 def merge_episodes(first: dict, second: dict) -> dict:
@@ -81,9 +170,11 @@ def merge_episodes(first: dict, second: dict) -> dict:
 
 @torch.no_grad()
 def run_episodes(cfg, ac: ActorCritic, obs_stats: Optional[dict], seeds: Sequence[int], deterministic: bool = True,
-                 video_path: Optional[Path] = None, progress: Optional[bool] = None) -> dict:
+                 video_path: Optional[Path] = None, progress: Optional[bool] = None,
+                 video_episodes: Sequence[int] = (0,), video_length: Optional[float] = None) -> dict:
     """One episode per seed (each starts from `env.set_seed(seed)`, so any subset of an eval's seeds
-    gives the same episodes it gives there); the per-episode record that `summarize` reads."""
+    gives the same episodes it gives there); the per-episode record that `summarize` reads. With
+    video_path, episodes video_episodes (indices into seeds) are filmed: Filming."""
     episodes = len(seeds)
     render = {"render_mode": "rgb_array", "width": VIDEO_SIZE[0], "height": VIDEO_SIZE[1]} if video_path else {}
     env = make_torchrl_env(cfg.env, clip_actions=ac.head == "normal", gamma=cfg.advantage.gamma,
@@ -95,8 +186,12 @@ def run_episodes(cfg, ac: ActorCritic, obs_stats: Optional[dict], seeds: Sequenc
         ac.action_low, ac.action_high = ac.action_low.cpu(), ac.action_high.cpu()
     actor = deterministic_policy(ac) if deterministic else ac.actor
     mode = ExplorationType.DETERMINISTIC if deterministic else ExplorationType.RANDOM
-    returns, lengths, frames, distances, gaits, crossed, heights = [], [], [], [], [], [], []
+    returns, lengths, distances, gaits, crossed, heights = [], [], [], [], [], []
+    terminated, ends = [], []  # per episode: ended by the env (not its time limit), and why (locomotion envs)
     gym_env = env.base_env._env
+    film = (Filming(video_path, gym_env, [e for e in video_episodes if 0 <= e < episodes], video_length)
+            if video_path is not None else None)
+    video = None
     sim = getattr(gym_env.unwrapped, "data", None)  # MuJoCo envs: qpos[0:2] is the base's x, y
     loco = gym_env.unwrapped if isinstance(gym_env.unwrapped, LocomotionEnv) else None
     heading = loco.heading if loco is not None else np.array([1.0, 0.0])  # forward: +x unless the env says
@@ -109,14 +204,13 @@ def run_episodes(cfg, ac: ActorCritic, obs_stats: Optional[dict], seeds: Sequenc
                 env.set_seed(episode_seed)
                 start = env.reset()
                 xy_start = sim.qpos[:2].copy() if sim is not None else None
-                callback = None
-                if video_path is not None and i == 0:  # film the first episode, frame after frame
-                    frames.append(gym_env.render())
-                    callback = lambda *_: frames.append(gym_env.render())  # noqa: E731
+                callback = film.start(i) if film is not None else None
                 rollout = env.rollout(max_steps=1_000_000, policy=actor, break_when_any_done=True,
                                       auto_reset=False, tensordict=start, callback=callback)
                 returns.append(float(rollout.get(("next", "reward")).sum()))
                 lengths.append(int(rollout.shape[-1]))
+                terminated.append(bool(rollout.get(("next", "terminated"))[-1].any()))
+                ends.append(loco.termination if loco is not None else None)
                 if sim is not None:
                     moved = sim.qpos[:2] - xy_start
                     distances.append((float(moved @ heading[:len(moved)]), float(sim.qpos[0])))
@@ -125,25 +219,24 @@ def run_episodes(cfg, ac: ActorCritic, obs_stats: Optional[dict], seeds: Sequenc
                     if loco.has_step:
                         crossed.append(loco.crossed())
                         heights.append(loco.step_height)
-                shown.update(i + 1)
-    except Exception as exc:
-        if video_path is not None and not frames:
-            raise ConfigError(f"rendering is unavailable here ({type(exc).__name__}: {str(exc).splitlines()[0]}); "
-                              "set MUJOCO_GL=egl (or osmesa) or run with video=false") from exc
-        raise
+                if film is not None:
+                    shown.update(i + 1, film.spent_s, film.left_s(i + 1, lengths))
+                else:
+                    shown.update(i + 1)
     finally:
         env.close()
-    if video_path is not None:
-        write_video(video_path, frames)
+        if film is not None:
+            video = film.close()
     return {"returns": returns, "lengths": lengths, "distances": distances, "gaits": gaits, "crossed": crossed,
             "heights": heights, "dt": gym_env.unwrapped.dt if sim is not None else None,
-            "success_margin": loco.success_margin if crossed else None}
+            "success_margin": loco.success_margin if crossed else None, "video": video, "terminated": terminated,
+            "ends": ends, "seeds": list(seeds), "feet": tuple(loco.foot_names) if loco is not None else None}
 
 
 def summarize(cfg, episodes: dict) -> dict:
     """The eval's figures from `run_episodes`' record."""
     returns, lengths, distances = episodes["returns"], episodes["lengths"], episodes["distances"]
-    crossed, gaits = episodes["crossed"], episodes["gaits"]
+    crossed, gaits, terminated = episodes["crossed"], episodes["gaits"], episodes["terminated"]
     result = {
         "return_mean": float(np.mean(returns)),
         "return_std": float(np.std(returns)),
@@ -152,32 +245,63 @@ def summarize(cfg, episodes: dict) -> dict:
         "returns": returns,
         "lengths": lengths,
     }
+    beyond = None  # per episode: beyond the success line when the episode ended
     if distances:
         # Forward progress of the base along its heading: mean velocity over each episode, and where it ended.
         dt = episodes["dt"]
         velocities = [d / (n * dt) for (d, _), n in zip(distances, lengths)]
         result.update(forward_velocity_mean=float(np.mean(velocities)), forward_velocity_std=float(np.std(velocities)),
                       x_final_mean=float(np.mean([x1 for _, x1 in distances])))
-        if crossed:  # a step env: the env's criterion, the trunk success_margin beyond the step's edge
-            result.update(success_rate=float(np.mean(crossed)), success_margin=episodes["success_margin"],
+        if crossed:  # a step env: the env's line, the trunk success_margin beyond the step's edge
+            beyond = crossed
+            result.update(success_margin=episodes["success_margin"],
                           step_height_mean=float(np.mean(episodes["heights"])))
         elif cfg.eval.get("success_x") is not None:
-            result["success_rate"] = float(np.mean([x1 >= cfg.eval.success_x for _, x1 in distances]))
+            beyond = [x1 >= cfg.eval.success_x for _, x1 in distances]
             result["success_x"] = float(cfg.eval.success_x)
+    # why episodes ended early: the env's reason (locomotion envs), else 'terminated' (the env said only that)
+    ends = [(why or "terminated") if stop else None for stop, why in zip(terminated, episodes["ends"])]
+    if beyond is not None:
+        # success: beyond the line when the episode ends, and the episode did not end by a fall or a forbidden
+        # contact (terminated); crossed_at_end_rate counts the line alone, terminated episodes too
+        result.update(success_rate=float(np.mean([b and not t for b, t in zip(beyond, terminated)])),
+                      crossed_at_end_rate=float(np.mean(beyond)))
+    result["terminated_share"] = float(np.mean(terminated))
+    result["termination_shares"] = {why: ends.count(why) / len(ends) for why in sorted(set(ends) - {None})}
     if gaits:
+        result["feet"] = list(episodes["feet"])
         result.update(gait_figures(gaits, cfg.env.locomotion.get("joint_speed_limit")))
+    result["outcomes"] = [  # one per episode, in order
+        {"seed": seed, "length": n, "return": r, "terminated": stop, "termination": why,
+         **({"crossed": bool(b), "success": bool(b and not stop)} if beyond is not None else {}),
+         **({"foot_contact_share": gaits[i]["foot_contact_share"]} if gaits else {})}
+        for i, (seed, n, r, stop, why) in enumerate(zip(episodes["seeds"], lengths, returns, terminated, ends))
+        for b in [beyond[i] if beyond is not None else None]]
     return result
 
 
-# What an eval of a locomotion env adds: gait_figures' keys (also in summary.json and the height sweep)
-GAIT_KEYS = ("stride_frequency", "duty_factor", "peak_joint_speed", "over_speed_limit_share", "body_contact_share")
+# What an eval of a locomotion env adds: gait_figures' keys and the feet's names (also in summary.json and the
+# height sweep). Per foot, in the model's foot order (`feet`): foot_contact_share, the share of time on the ground,
+# and touchdown_frequency (Hz). <kind>_pairs_together: of the time a foot of a pair is down, the share both are, the
+# two pairs of a kind pooled (locomotion.FOOT_PAIRS): diagonal LF+RH, RF+LH (a trot: near 1), same_side LF+LH,
+# RF+RH (a pace), same_end LF+RF, LH+RH (a bound); only for four feet, one at each corner.
+PAIR_KEYS = tuple(f"{kind}_pairs_together" for kind in FOOT_PAIRS)
+GAIT_KEYS = ("stride_frequency", "duty_factor", "peak_joint_speed", "over_speed_limit_share", "body_contact_share",
+             "feet", "foot_contact_share", "touchdown_frequency", *PAIR_KEYS)
 
 
 def gait_figures(gaits: list, speed_limit: Optional[float]) -> dict:
-    """Per-episode gait figures (locomotion.GaitMeter) over the eval: means, the peak joint speed's max and,
-    with a speed limit, the share of all the eval's physics steps in which a joint was over it."""
+    """Per-episode gait figures (locomotion.GaitMeter) over the eval: means (each foot's too), the peak joint
+    speed's max, the pairs' time down together over all the eval's time and, with a speed limit, the share of all
+    the eval's physics steps in which a joint was over it."""
     figures = {key: float(np.mean([g[key] for g in gaits]))
                for key in ("stride_frequency", "duty_factor", "body_contact_share")}
+    for key in ("foot_contact_share", "touchdown_frequency"):
+        figures[key] = np.mean([g[key] for g in gaits], axis=0).tolist() if gaits[0][key] else []
+    for kind in gaits[0]["pair_together_time_s"]:
+        down = sum(g["pair_down_time_s"][kind] for g in gaits)
+        together = sum(g["pair_together_time_s"][kind] for g in gaits)
+        figures[f"{kind}_pairs_together"] = float(together / down) if down > 0 else None
     figures["peak_joint_speed"] = float(max(g["peak_joint_speed"] for g in gaits))
     if speed_limit is not None:
         figures["joint_speed_limit"] = float(speed_limit)
@@ -186,33 +310,67 @@ def gait_figures(gaits: list, speed_limit: Optional[float]) -> dict:
     return figures
 
 
+def ended_line(result: dict) -> str:
+    """'8% end terminated (5% contact: trunk, 3% fall)'"""
+    reasons = ", ".join(f"{share:.0%} {why}" for why, share in result["termination_shares"].items())
+    return f"{result['terminated_share']:.0%} end terminated" + (f" ({reasons})" if reasons else "")
+
+
 def motion_line(result: dict) -> str:
-    """'; forward velocity 0.52 +- 0.04 m/s[, 80% beyond x=2.5 m]' where the env reports motion."""
+    """'; forward velocity 0.52 +- 0.04 m/s[, 80% of episodes cross ... and are not terminated][; gait ...]' where
+    the env reports motion."""
     if "forward_velocity_mean" not in result:
         return ""
     line = f"; forward velocity {result['forward_velocity_mean']:.2f} +- {result['forward_velocity_std']:.2f} m/s"
+    honest = (f"and are not terminated ({result['crossed_at_end_rate']:.0%} are beyond it at the end; "
+              f"{ended_line(result)})") if "success_rate" in result else ""
     if "success_margin" in result:
-        line += (f", {result['success_rate']:.0%} of episodes end {result['success_margin']} m beyond the step "
-                 f"({result['step_height_mean'] * 100:.0f} cm on average)")
+        line += (f", {result['success_rate']:.0%} of episodes cross the line {result['success_margin']} m beyond the "
+                 f"step ({result['step_height_mean'] * 100:.0f} cm on average) {honest}")
     elif "success_rate" in result:
-        line += f", {result['success_rate']:.0%} of episodes end beyond x={result['success_x']} m"
+        line += f", {result['success_rate']:.0%} of episodes end beyond x={result['success_x']} m {honest}"
+    elif result["terminated_share"]:
+        line += f", {ended_line(result)}"
     if "stride_frequency" in result:
         limit = (f" (limit {result['joint_speed_limit']:g}, passed {result['over_speed_limit_share']:.2%} of the time)"
                  if "joint_speed_limit" in result else "")
         line += (f"; gait: stride frequency {result['stride_frequency']:.1f} Hz, duty factor "
                  f"{result['duty_factor']:.2f}, peak joint speed {result['peak_joint_speed']:.1f} rad/s{limit}, "
                  f"a non-foot body on the ground {result['body_contact_share']:.0%} of the time")
+        if result["feet"]:
+            feet = zip(result["feet"], result["foot_contact_share"], result["touchdown_frequency"])
+            line += "; per foot, share of time on the ground and touchdowns/s: " + ", ".join(
+                f"{name} {share:.2f} {rate:.1f}" for name, share, rate in feet)
+        pairs = [(key[:-len("_pairs_together")].replace("_", " "), result[key]) for key in PAIR_KEYS
+                 if result.get(key) is not None]
+        if pairs:
+            line += ("; feet of a pair down together, of the time one is: " +
+                     ", ".join(f"{kind} {share:.2f}" for kind, share in pairs))
     return line
 
 
-def write_video(path: Path, frames: list) -> None:
-    import imageio.v2 as imageio
+def parse_video_choices(episodes_text: str, length_text: str, episodes: int) -> tuple:
+    """video_episodes= and video_length= as ([episode numbers], seconds or None)."""
+    try:
+        which = sorted({int(e) for e in episodes_text.split(",") if e.strip()})
+    except ValueError:
+        which = []
+    if not which or which[0] < 0 or which[-1] >= episodes:
+        raise ConfigError(f"video_episodes={episodes_text}: expected episode numbers in 0..{episodes - 1} (episodes="
+                          f"{episodes}) separated by commas, e.g. 0 or 0,3")
+    if not length_text:
+        return which, None
+    try:
+        length = float(length_text)
+    except ValueError:
+        length = math.nan
+    if not (length > 0 and math.isfinite(length)):
+        raise ConfigError(f"video_length={length_text}: expected the video's length in seconds > 0, e.g. 10 "
+                          "(simulated seconds: videos play in real time)")
+    return which, length
 
-    path.parent.mkdir(parents=True, exist_ok=True)
-    imageio.mimsave(path, frames, fps=VIDEO_FPS, macro_block_size=8)
 
-
-SWEEP_FILES = ("height_sweep.csv", "height_sweep.png")
+SWEEP_FILES = ("height_sweep.csv", "height_sweep.png", "height_sweep_episodes.csv", "height_sweep.json")
 
 
 def apply_overrides(cfg, overrides: list[str]):
@@ -242,57 +400,98 @@ def parse_heights(text: str) -> list[float]:
     return heights
 
 
+def sweep_row(height: float, episodes: int, result: dict) -> dict:
+    """One height's row of height_sweep.csv: success (beyond the line and not terminated), the line alone,
+    the share of episodes terminated and by each reason, the gait figures (each foot's a column per foot)."""
+    row = {"step_height_m": height, "episodes": episodes, "success_rate": result["success_rate"],
+           "forward_velocity_mean": result["forward_velocity_mean"], "return_mean": result["return_mean"],
+           "crossed_at_end_rate": result["crossed_at_end_rate"], "terminated_share": result["terminated_share"],
+           **{f"terminated: {why}": share for why, share in result["termination_shares"].items()}}
+    for key in GAIT_KEYS:
+        value = result.get(key)
+        if key == "feet":
+            continue
+        if isinstance(value, list):
+            row.update({f"{key} {foot}": v for foot, v in zip(result["feet"], value)})
+        else:
+            row[key] = value
+    return row
+
+
 def height_sweep(cfg, ac, obs_stats, heights: list[float], episodes: int, seed: int, out_dir: Path, title: str) -> list:
-    """Evaluate at each fixed step height; write height_sweep.csv and the success-rate curve height_sweep.png."""
+    """Evaluate at each fixed step height; write height_sweep.csv (a row per height), the success-rate curve
+    height_sweep.png, height_sweep_episodes.csv (a row per episode: crossed, terminated and why, length) and
+    height_sweep.json (each height's eval result, eval.json's figures)."""
     import csv
 
-    rows = []
+    from ppo_torchrl.rundir import atomic_write_json
+
+    rows, results, per_episode = [], [], []
     for height in heights:
         cfg.env.terrain.step_height = height
         result = evaluate_policy(cfg, ac, obs_stats, episodes, seed=seed, progress=True)
         if "success_margin" not in result:
             raise ConfigError("heights= needs a step env (a model with a body named 'step'); to put a flat-ground run "
                               "on the step add env.xml_file=quadruped_step.xml")
-        row = {"step_height_m": height, "episodes": episodes, "success_rate": result["success_rate"],
-               "forward_velocity_mean": result["forward_velocity_mean"], "return_mean": result["return_mean"],
-               **{k: result.get(k) for k in GAIT_KEYS}}
-        rows.append(row)
-        print(f"step {height * 100:g} cm: {row['success_rate']:.0%} of {episodes} episodes cross; forward velocity "
-              f"{row['forward_velocity_mean']:.2f} m/s", flush=True)
+        rows.append(sweep_row(height, episodes, result))
+        results.append({"step_height_m": height, **result})
+        for outcome in result["outcomes"]:
+            shares = outcome.get("foot_contact_share", [])
+            per_episode.append({"step_height_m": height,
+                                **{k: v for k, v in outcome.items() if k != "foot_contact_share"},
+                                **{f"foot_contact_share {foot}": v for foot, v in zip(result["feet"], shares)}})
+        feet = ", ".join(f"{foot} {share:.2f}" for foot, share in zip(result["feet"], result["foot_contact_share"]))
+        print(f"step {height * 100:g} cm: {result['success_rate']:.0%} of {episodes} episodes cross and are not "
+              f"terminated ({result['crossed_at_end_rate']:.0%} beyond the line at the end; {ended_line(result)}); "
+              f"forward velocity {result['forward_velocity_mean']:.2f} m/s; share of time on the ground: {feet}",
+              flush=True)
     out_dir.mkdir(parents=True, exist_ok=True)
-    with open(out_dir / SWEEP_FILES[0], "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
+    for name, table in ((SWEEP_FILES[0], rows), (SWEEP_FILES[2], per_episode)):
+        columns = list(dict.fromkeys(k for row in table for k in row))  # a reason met at one height only: 0 elsewhere
+        with open(out_dir / name, "w", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=columns, restval=0.0 if name == SWEEP_FILES[0] else "")
+            writer.writeheader()
+            writer.writerows(table)
+    atomic_write_json(out_dir / SWEEP_FILES[3], {"title": title, "episodes": episodes, "seed": seed,
+                                                 "heights": results})
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(5.5, 3.8))
-    ax.plot([r["step_height_m"] * 100 for r in rows], [r["success_rate"] * 100 for r in rows], "o-")
-    ax.set(xlabel="step height (cm)", ylabel=f"episodes that cross (%, of {episodes})", ylim=(-3, 103))
+    x = [r["step_height_m"] * 100 for r in rows]
+    ax.plot(x, [r["success_rate"] * 100 for r in rows], "o-", label="cross and not terminated (success)")
+    ax.plot(x, [r["crossed_at_end_rate"] * 100 for r in rows], "s--", color="0.6", label="beyond the line at the end")
+    ax.set(xlabel="step height (cm)", ylabel=f"episodes (%, of {episodes})", ylim=(-3, 103))
+    ax.legend(fontsize=7, loc="lower left")
     ax.set_title(title, fontsize=8)
     ax.grid(alpha=0.3)
     fig.tight_layout()
     fig.savefig(out_dir / SWEEP_FILES[1], dpi=120)
     plt.close(fig)
+    print(f"per episode: {out_dir / SWEEP_FILES[2]}; every figure: {out_dir / SWEEP_FILES[3]}")
     return rows
 
 
 def main(argv: list[str]) -> dict:
     from ppo_torchrl.checkpoint import check_spec, load_policy
-    from ppo_torchrl.cli import parse_args
+    from ppo_torchrl.cli import parse_args, resolve_run
     from ppo_torchrl.envs import env_spec
     from ppo_torchrl.rundir import atomic_write_json, is_run, record, unwritable
 
     usage = ("python -m ppo_torchrl.evaluate run=<run dir> [checkpoint=best|last|<file>] [episodes=10] [video=false] "
-             "[seed=0] [heights=<m,m,...> [out=<dir>]] [env.<key>=<value> ...]")
+             "[video_episodes=0] [video_length=<s>] [seed=0] [heights=<m,m,...> [out=<dir>]] [env.<key>=<value> ...]")
     help = {
-        "run": "the run dir to evaluate (one with config.yaml and checkpoints/)",
+        "run": "the run dir to evaluate (one with checkpoints/), or latest, or latest/<env>: the newest run under outputs/",
         "checkpoint": "best, last, or a checkpoint file",
         "episodes": "number of deterministic episodes (per height with heights=)",
-        "video": "also film the first episode: <run dir>/eval/<checkpoint>.mp4 (MUJOCO_GL=egl)",
+        "video": "also film the first episode: <run dir>/eval/<checkpoint>.mp4, real-time speed, the camera following "
+                 "the robot (MUJOCO_GL=egl)",
+        "video_episodes": "the episodes to film, numbered from 0, e.g. 0 or 0,3: one after the other in one mp4 "
+                          "(implies video=true)",
+        "video_length": "at most this many seconds of video in all, which is simulated time as videos play in real "
+                        "time; empty: whole episodes (implies video=true)",
         "seed": "episode i starts from seed * 1000 + i: the same seed replays the same episodes",
         "heights": "step heights in m, e.g. 0,0.05,0.1,0.15,0.2: evaluate at each; writes height_sweep.csv and the "
                    "success-rate curve height_sweep.png",
@@ -305,14 +504,17 @@ def main(argv: list[str]) -> dict:
              "(a step height in m) or env.xml_file=quadruped_step.xml (a flat-ground run on the step).")
     overrides = [arg for arg in argv if arg.startswith("env.")]
     args = parse_args([arg for arg in argv if not arg.startswith("env.")],
-                      {"run": None, "checkpoint": "best", "episodes": 10, "video": False, "seed": 0, "heights": "",
-                       "out": ""}, usage, help, about)
+                      {"run": None, "checkpoint": "best", "episodes": 10, "video": False, "video_episodes": "0",
+                       "video_length": "", "seed": 0, "heights": "", "out": ""}, usage, help, about)
     if args["episodes"] < 1:
         raise ConfigError(f"episodes={args['episodes']} must be >= 1")
     heights = parse_heights(args["heights"]) if args["heights"] else None
+    if any(arg.startswith(("video_episodes=", "video_length=")) for arg in argv):
+        args["video"] = True
+    video_episodes, video_length = parse_video_choices(args["video_episodes"], args["video_length"], args["episodes"])
     if heights and args["video"]:
         raise ConfigError("video=true films one evaluation; leave it out of a heights= sweep")
-    run_dir = Path(args["run"])
+    run_dir = resolve_run(args["run"])  # run=latest[/<env>]: the newest run dir under outputs/
     out_dir = Path(args["out"]) if args["out"] else run_dir / "eval"
     why = unwritable(out_dir)  # before any episode runs
     if why:
@@ -333,15 +535,17 @@ def main(argv: list[str]) -> dict:
         return {"heights": rows}
     video = out_dir / f"{args['checkpoint'] if args['checkpoint'] in ('best', 'last') else 'checkpoint'}.mp4"
     result = evaluate_policy(cfg, ac, obs_stats, args["episodes"], seed=args["seed"],
-                             video_path=video if args["video"] else None, progress=True)
+                             video_path=video if args["video"] else None, progress=True,
+                             video_episodes=video_episodes, video_length=video_length)
     result.update(env=env_label(cfg.env), checkpoint=args["checkpoint"], checkpoint_frames=state["frames"],
-                  episodes=args["episodes"], video=str(video) if args["video"] else None, overrides=overrides)
+                  episodes=args["episodes"], video=result.get("video"), overrides=overrides)
     atomic_write_json(out_dir / "eval.json", result)
     if is_run(run_dir):
         record(run_dir)
     print(f"{label}: return {result['return_mean']:.1f} +- "
           f"{result['return_std']:.1f}, length {result['length_mean']:.0f} +- {result['length_std']:.0f} "
-          f"over {args['episodes']} episodes" + motion_line(result) + (f"; video: {video}" if args["video"] else ""))
+          f"over {args['episodes']} episodes" + motion_line(result) + ("; " + video_line(result["video"])
+                                                                       if result["video"] else ""))
     return result
 
 

@@ -31,15 +31,19 @@ configured (so a config without these keys steps exactly as Ant-v5 does):
   samples) run along the heading, and the box is turned to face it, so a robot built facing -x or +y
   meets the step ahead of it.
 - **Termination on contact** (`terminate_on_contact`, legged_gym's): the episode also ends when a
-  listed body (e.g. the trunk) touches the ground or the step.
+  listed body (e.g. the trunk) touches the ground or the step. Why an episode ended is `termination`
+  (also in `info`): 'contact: <body>', else is_healthy's 'fall' (under healthy_z_range), 'too high',
+  'non-finite state'; None while it runs or when only the time limit ends it.
 - **Observation extras** (opt-in, the policy is blind by default): one 0/1 ground-contact flag per foot;
   terrain heights at points ahead of the main body, computed from the known step geometry
   (the step's top where the point lies beyond its edge, else 0: the floor is at z = 0).
-- **Gait bookkeeping** for eval (`measure_gait = True`): stride frequency, duty factor, peak joint
-  speed and the share of time a non-foot body touches the ground, sampled at every physics step. A
-  non-foot body is a robot body that holds no foot geom: the trunk, a thigh; not the shank that
-  carries the foot (its capsule ends inside the foot sphere and touches whenever the foot sinks a
-  millimetre into the ground).
+- **Gait bookkeeping** for eval (`measure_gait = True`): stride frequency, duty factor, each foot's
+  share of time on the ground and touchdowns per second, for four feet at four corners (`foot_corners`)
+  the share of time both feet of a pair are down (diagonal, same side, same end: a trot, a pace, a
+  bound), peak joint speed and the share of time a non-foot body touches the ground, sampled at every
+  physics step. A non-foot body is a robot body that holds no foot geom: the trunk, a thigh; not the
+  shank that carries the foot (its capsule ends inside the foot sphere and touches whenever the foot
+  sinks a millimetre into the ground).
 - **Tracking camera**: a rendered model without a camera named `track` gets one on its main body.
 """
 
@@ -61,6 +65,10 @@ LOCOMOTION_ID = "ppo_torchrl/Locomotion-v0"
 STEP_BODY = "step"  # terrain models: the static body that holds the step's box geom
 HEADINGS = {"x": 0.0, "-x": 180.0, "y": 90.0, "-y": 270.0}
 MIN_AIR_S = 0.02  # gait: a touchdown counts after at least this long in the air (contact chatter is not a stride)
+CORNERS = ("LF", "RF", "LH", "RH")  # a four-footed robot's feet: left/right, fore/hind
+# gait: the foot pairs whose time down together tells the gaits apart (a trot, a pace, a bound)
+FOOT_PAIRS = {"diagonal": (("LF", "RH"), ("RF", "LH")), "same_side": (("LF", "LH"), ("RF", "RH")),
+              "same_end": (("LF", "RF"), ("LH", "RH"))}
 
 # Keys of env.locomotion that LocomotionEnv takes (the others are Ant-v5's own arguments).
 LEGGED_KEYS = ("heading", "target_speed", "torque_limit", "joint_speed_limit", "kp", "kd", "armature",
@@ -96,11 +104,18 @@ def heading_angle(heading) -> Optional[float]:
 
 
 class GaitMeter:
-    """Per episode: foot contacts, touchdowns, peak joint speed and time over the speed limit, non-foot ground
-    contact, sampled each physics step."""
+    """Per episode: foot contacts and touchdowns (each foot), the time the feet of each pair of FOOT_PAIRS are down
+    together, peak joint speed and time over the speed limit, non-foot ground contact, sampled each physics step.
 
-    def __init__(self, n_feet: int, speed_limit: Optional[float] = None):
+    corners: each foot's corner (CORNERS, in the feet's order) where the robot has one foot at each; None: no
+    pair figures."""
+
+    def __init__(self, n_feet: int, speed_limit: Optional[float] = None, corners: Optional[list] = None):
         self.n_feet, self.speed_limit = n_feet, speed_limit
+        self.pair_kinds = list(FOOT_PAIRS) if corners else []
+        pairs = [pair for kind in self.pair_kinds for pair in FOOT_PAIRS[kind]]  # two pairs of each kind
+        self._first = np.array([corners.index(a) for a, _ in pairs], np.int64)
+        self._second = np.array([corners.index(b) for _, b in pairs], np.int64)
         self.reset()
 
     def reset(self) -> None:
@@ -112,6 +127,8 @@ class GaitMeter:
         self.peak_joint_speed = 0.0
         self.over_limit_time = 0.0
         self.body_contact_time = 0.0
+        self.pair_together_time = np.zeros(len(self._first))  # both feet of the pair down
+        self.pair_down_time = np.zeros(len(self._first))  # at least one of them down
 
     def add(self, feet: np.ndarray, joint_speed: float, body_contact: bool, dt: float) -> None:
         if self.previous is not None:
@@ -120,6 +137,10 @@ class GaitMeter:
         self.previous = feet
         self.time += dt
         self.contact_time += dt * feet
+        if len(self._first):
+            first, second = feet[self._first], feet[self._second]
+            self.pair_together_time += dt * (first & second)
+            self.pair_down_time += dt * (first | second)
         self.peak_joint_speed = max(self.peak_joint_speed, joint_speed)
         if self.speed_limit is not None and joint_speed > self.speed_limit:
             self.over_limit_time += dt
@@ -130,6 +151,13 @@ class GaitMeter:
         return {
             "stride_frequency": float(self.touchdowns.mean() / t) if self.n_feet else 0.0,  # Hz, per foot
             "duty_factor": float(self.contact_time.mean() / t) if self.n_feet else 0.0,  # share of time a foot is down
+            "foot_contact_share": (self.contact_time / t).tolist(),  # each foot's share of time on the ground
+            "touchdown_frequency": (self.touchdowns / t).tolist(),  # each foot's touchdowns per second (Hz)
+            # each kind of pair (its two pairs pooled): the time both feet of a pair are down, and one or both
+            "pair_together_time_s": {k: float(self.pair_together_time[2 * i:2 * i + 2].sum())
+                                     for i, k in enumerate(self.pair_kinds)},
+            "pair_down_time_s": {k: float(self.pair_down_time[2 * i:2 * i + 2].sum())
+                                 for i, k in enumerate(self.pair_kinds)},
             "peak_joint_speed": float(self.peak_joint_speed),  # rad/s, actuated joints
             "time_s": float(self.time),
             "over_speed_limit_time_s": float(self.over_limit_time),  # an actuated joint over joint_speed_limit
@@ -190,7 +218,7 @@ class LocomotionEnv(AntEnv):
                                     or self._w["feet_air_time_weight"] or self._w["body_contact_cost_weight"])
         self._dt = self.dt  # the control step (s), read from the model once
         self.measure_gait = False  # evaluate sets it: gait figures sampled every physics step
-        self.gait = GaitMeter(len(self.feet), self._speed_limit)
+        self.gait = GaitMeter(len(self.feet), self._speed_limit, self.foot_corners)
         self._reset_episode_memory()
         extra = len(self.feet) * self.observe_contacts + self.height_samples
         if extra:
@@ -294,6 +322,18 @@ class LocomotionEnv(AntEnv):
         self._kind[self.feet] = 2
         self._foot_index = np.full(model.ngeom, -1, np.int64)
         self._foot_index[self.feet] = np.arange(len(self.feet))
+        self.foot_names = [model.geom(g).name or f"foot {i}" for i, g in enumerate(self.feet)]
+        self.foot_corners = self._corners()
+
+    def _corners(self) -> Optional[list]:
+        """Each foot's corner (CORNERS: left or right of the feet's centre, ahead of it along the heading or
+        behind) in the model's initial pose, for a robot with four feet, one at each corner; else None."""
+        if len(self.feet) != 4:
+            return None
+        xy = self.data.geom_xpos[self.feet, :2] - self.data.geom_xpos[self.feet, :2].mean(axis=0)
+        ahead, left = xy @ self.heading, xy @ np.array([-self.heading[1], self.heading[0]])
+        corners = [("L" if y > 0 else "R") + ("F" if x > 0 else "H") for x, y in zip(ahead, left)]
+        return corners if sorted(corners) == sorted(CORNERS) else None
 
     def _set_up_contact_termination(self, names) -> None:
         model = self.model
@@ -308,10 +348,15 @@ class LocomotionEnv(AntEnv):
 
     def touches_ground(self) -> bool:
         """A geom of a terminate_on_contact body touches the ground or the step."""
+        return self._ending_contact() is not None
+
+    def _ending_contact(self) -> Optional[str]:
+        """The terminate_on_contact body that touches the ground or the step (the first geom's), or None."""
         if not self._ends_on_contact:
-            return False
+            return None
         partners = self._now[0] if self._now is not None else self._ground_partners()
-        return bool(self._ending_geom[partners].any())
+        ending = partners[self._ending_geom[partners]]
+        return self.model.body(self.model.geom_bodyid[ending[0]]).name if len(ending) else None
 
     def _set_up_terrain(self, terrain: dict, evaluation: bool) -> None:
         model = self.model
@@ -403,6 +448,7 @@ class LocomotionEnv(AntEnv):
         self._prev_contact = np.zeros(len(self.feet), bool)
         self._prev_feet_xy = None
         self._stepped = False
+        self.termination = None  # why the episode ended (step): 'contact: <body>', 'fall', ...; None while it runs
         self.gait.reset()
 
     def reset(self, *, seed=None, options=None):
@@ -469,11 +515,17 @@ class LocomotionEnv(AntEnv):
         """Ant-v5's test on the root's z; with healthy_z_above_terrain, that z less the terrain's height under main_body."""
         if self._healthy_now is not None:
             return self._healthy_now
-        if not self._z_above_terrain:
-            return super().is_healthy
+        return self._unhealthy() is None
+
+    def _unhealthy(self) -> Optional[str]:
+        """Why is_healthy is False: 'non-finite state', 'fall' (the root's z under healthy_z_range, above the
+        terrain with healthy_z_above_terrain), 'too high' (over it); None while healthy."""
         state = self.state_vector()
+        if not np.isfinite(state).all():
+            return "non-finite state"
         low, high = self._healthy_z_range
-        return bool(np.isfinite(state).all() and low <= state[2] - self._ground_under_body() <= high)
+        z = state[2] - self._ground_under_body() if self._z_above_terrain else state[2]
+        return "fall" if z < low else "too high" if z > high else None
 
     def crossed(self) -> bool:
         """Success on a step env: the main body is success_margin beyond the step's edge."""
@@ -550,10 +602,15 @@ class LocomotionEnv(AntEnv):
         reward = reward + extra_reward if extra_info else reward
         if self._positive_only:  # legged_gym's only_positive_rewards: costs never make an early fall pay
             reward = max(reward, 0.0)
-        terminated = ((not self.is_healthy) and self._terminate_when_unhealthy) or self.touches_ground()
+        # why the episode ends here: a terminate_on_contact body on the ground first, then is_healthy's reason
+        contact = self._ending_contact()
+        self.termination = (f"contact: {contact}" if contact is not None else
+                            self._unhealthy() if self._terminate_when_unhealthy and not self.is_healthy else None)
+        terminated = self.termination is not None
         info = {"x_position": self.data.qpos[0], "y_position": self.data.qpos[1],
                 "distance_from_origin": np.linalg.norm(self.data.qpos[0:2], ord=2),
                 "x_velocity": x_velocity, "y_velocity": y_velocity, "forward_velocity": speed,
+                "termination": self.termination,
                 **reward_info, **extra_info}
         self._now = self._healthy_now = None
         if self.render_mode == "human":

@@ -260,13 +260,33 @@ def test_terminate_on_contact_ends_the_episode_when_the_trunk_touches_down():
         env.reset(seed=0)
         loco.data.qpos[2:7] = [0.07, 0.0, 1.0, 0.0, 0.0]  # on its back, legs up: the trunk's box (7 cm half height) lies on the floor
         mujoco.mj_forward(loco.model, loco.data)
-        return env.step(np.zeros(12, np.float32))[2]
+        _, _, terminated, _, info = env.step(np.zeros(12, np.float32))
+        assert info["termination"] == loco.termination and terminated == (loco.termination is not None)
+        return loco.termination
 
-    assert trunk_on_the_ground("env.locomotion.terminate_on_contact=[trunk]")
-    assert not trunk_on_the_ground()  # off by default: only healthy_z_range ends an episode
+    assert trunk_on_the_ground("env.locomotion.terminate_on_contact=[trunk]") == "contact: trunk"
+    assert trunk_on_the_ground() is None  # off by default: only healthy_z_range ends an episode
+    # the trunk on the floor is also under a 20 cm fall line: the contact is named first
+    assert trunk_on_the_ground("env.locomotion.terminate_on_contact=[trunk]",
+                               "env.locomotion.healthy_z_range=[0.2,2.0]") == "contact: trunk"
+    assert trunk_on_the_ground("env.locomotion.healthy_z_range=[0.2,2.0]") == "fall"
     env = env_of("env=quadruped", "env.locomotion.terminate_on_contact=[trunk]")
     env.reset(seed=0)
     assert not any(env.step(np.zeros(12, np.float32))[2] for _ in range(5))  # standing: the feet touch, not the trunk
+
+
+def test_the_env_says_why_an_episode_ends():
+    def first_step(*overrides):
+        env = env_of("env=quadruped", *overrides)
+        env.reset(seed=0)
+        _, _, terminated, _, info = env.step(np.zeros(12, np.float32))
+        return terminated, info["termination"]
+
+    assert first_step() == (False, None)  # standing in its healthy range
+    assert first_step("env.locomotion.healthy_z_range=[0.6,1.0]") == (True, "fall")  # the trunk stands at ~0.45 m
+    assert first_step("env.locomotion.healthy_z_range=[0.0,0.3]") == (True, "too high")
+    assert first_step("env.locomotion.healthy_z_range=[0.6,1.0]", "env.locomotion.terminate_when_unhealthy=false") == (
+        False, None)
 
 
 def test_healthy_z_above_terrain_reads_the_fall_line_from_the_step_top():
@@ -455,13 +475,22 @@ def test_a_curriculum_run_logs_its_level_and_success(step_run):
                         for r in rows)
 
 
-def test_evaluate_at_a_step_height_reports_gait_figures(step_run):
+def test_evaluate_at_a_step_height_reports_gait_figures(step_run, capsys):
     result = evaluate.main([f"run={step_run}", "episodes=2", "env.terrain.step_height=0.05"])
     saved = json.loads((step_run / "eval" / "eval.json").read_text())
     assert saved["step_height_mean"] == pytest.approx(0.05) and saved["overrides"] == ["env.terrain.step_height=0.05"]
-    for key in ("success_rate", "stride_frequency", "duty_factor", "peak_joint_speed", "over_speed_limit_share",
-                "body_contact_share"):
+    for key in ("success_rate", "crossed_at_end_rate", "terminated_share", "stride_frequency", "duty_factor",
+                "peak_joint_speed", "over_speed_limit_share", "body_contact_share", *evaluate.GAIT_KEYS):
         assert key in result and key in saved
+    assert saved["feet"] == ["LF_foot", "RF_foot", "LH_foot", "RH_foot"]  # the model's foot order
+    assert len(saved["foot_contact_share"]) == len(saved["touchdown_frequency"]) == 4
+    assert saved["duty_factor"] == pytest.approx(np.mean(saved["foot_contact_share"]))
+    outcomes = saved["outcomes"]  # one record per episode
+    assert [o["seed"] for o in outcomes] == [0, 1] and [o["length"] for o in outcomes] == saved["lengths"]
+    assert saved["success_rate"] == np.mean([o["crossed"] and not o["terminated"] for o in outcomes])
+    printed = capsys.readouterr().out
+    assert f"{saved['success_rate']:.0%} of episodes cross the line" in printed and "are not terminated" in printed
+    assert f"LF_foot {saved['foot_contact_share'][0]:.2f}" in printed
     assert 0.0 <= result["duty_factor"] <= 1.0 and result["peak_joint_speed"] <= result["joint_speed_limit"]
     assert result["over_speed_limit_share"] == 0.0  # never over the limit, as the peak says
 
@@ -481,9 +510,89 @@ def test_the_gait_meter_counts_the_time_a_joint_is_over_the_speed_limit():
     assert "over_speed_limit_share" not in gait_figures(episodes, None)
 
 
+def test_success_is_crossing_without_a_fall_or_a_forbidden_contact():
+    from ppo_torchrl.locomotion import GaitMeter
+
+    gait = GaitMeter(4).summary()
+    record = {"returns": [1.0, 2.0, 3.0, 4.0], "lengths": [500, 120, 500, 80], "dt": 0.02, "success_margin": 0.5,
+              "distances": [(5.0, 5.0)] * 4, "gaits": [gait] * 4, "heights": [0.15] * 4, "seeds": [10, 11, 12, 13],
+              "crossed": [True, True, False, False], "terminated": [False, True, False, True],
+              "ends": [None, "contact: trunk", None, "fall"], "feet": ("a", "b", "c", "d")}
+    result = evaluate.summarize(compose_config(["env=quadruped_step"]), record)
+    # beyond the line at the end: 2 of 4; of them one ended on its trunk: 1 of 4 succeeds
+    assert (result["success_rate"], result["crossed_at_end_rate"], result["terminated_share"]) == (0.25, 0.5, 0.5)
+    assert result["termination_shares"] == {"contact: trunk": 0.25, "fall": 0.25}
+    assert [(o["seed"], o["crossed"], o["success"], o["termination"]) for o in result["outcomes"]] == [
+        (10, True, True, None), (11, True, False, "contact: trunk"), (12, False, False, None),
+        (13, False, False, "fall")]
+    line = evaluate.motion_line(result)
+    assert "25% of episodes cross the line 0.5 m beyond the step" in line and "50% are beyond it at the end" in line
+    assert "50% end terminated (25% contact: trunk, 25% fall)" in line
+    # an env without its own reason (not a locomotion env) still counts its terminated episodes
+    record.update(ends=[None] * 4)
+    result = evaluate.summarize(compose_config(["env=quadruped_step"]), record)
+    assert result["termination_shares"] == {"terminated": 0.5}
+
+
+def gait_of(pattern: str, corners=("LF", "RF", "LH", "RH"), repeats: int = 20):
+    """Per-foot figures of a repeated contact pattern: each character a 0.05 s phase, the feet down in it
+    ('a' LF+RH, 'b' RF+LH, 'l' LF+LH, 'r' RF+RH, 'f' LF+RF, 'h' LH+RH, '3' all but RH, '-' none)."""
+    from ppo_torchrl.evaluate import gait_figures
+    from ppo_torchrl.locomotion import GaitMeter
+
+    down = {"a": "LF RH", "b": "RF LH", "l": "LF LH", "r": "RF RH", "f": "LF RF", "h": "LH RH", "3": "LF RF LH",
+            "-": ""}
+    meter = GaitMeter(4, corners=list(corners))
+    for phase in pattern * repeats:
+        feet = np.array([c in down[phase].split() for c in corners])
+        for _ in range(10):
+            meter.add(feet, 0.0, False, 0.005)
+    return gait_figures([meter.summary()], None)
+
+
+def test_per_foot_gait_figures_tell_a_trot_a_pace_a_bound_and_a_limp_apart():
+    trot, pace, bound = gait_of("a-b-"), gait_of("l-r-"), gait_of("f-h-")
+    for gait, together in ((trot, "diagonal"), (pace, "same_side"), (bound, "same_end")):
+        assert gait["foot_contact_share"] == pytest.approx([0.25] * 4)
+        assert gait["touchdown_frequency"] == pytest.approx([5.0] * 4, rel=0.05)  # one touchdown each 0.2 s cycle
+        assert {k: gait[f"{k}_pairs_together"] for k in ("diagonal", "same_side", "same_end")} == {
+            k: 1.0 if k == together else 0.0 for k in ("diagonal", "same_side", "same_end")}
+    limp = gait_of("3-")  # RH never lands: a mean over feet (the duty factor) cannot see it, the per-foot share can
+    assert limp["foot_contact_share"] == pytest.approx([0.5, 0.5, 0.5, 0.0]) and limp["touchdown_frequency"][3] == 0
+    assert limp["duty_factor"] == pytest.approx(0.375)
+    # the figures follow the model's foot order, whatever it is
+    assert gait_of("a-b-", corners=("RH", "LH", "RF", "LF"))["diagonal_pairs_together"] == 1.0
+    from ppo_torchrl.locomotion import GaitMeter
+
+    assert "diagonal_pairs_together" not in evaluate.gait_figures([GaitMeter(3).summary()], None)  # no corners
+
+
+def test_each_foot_is_placed_at_its_corner_along_the_heading(tmp_path):
+    assert env_of("env=quadruped").unwrapped.foot_corners == ["LF", "RF", "LH", "RH"]
+    a1like = env_of("env=quadruped_a1like").unwrapped  # built facing -x: its front is world -x
+    assert a1like.foot_names == ["FL_foot", "FR_foot", "RL_foot", "RR_foot"]
+    assert a1like.foot_corners == ["LF", "RF", "LH", "RH"]
+    ant = env_of("env=mjcf", f"env.xml_file={GYM_ANT_XML}").unwrapped  # legs out at 45 degrees, in turn round
+    assert ant.foot_corners == ["LF", "LH", "RH", "RF"]
+    (tmp_path / "one_leg.xml").write_text(FACING_MINUS_X)
+    one_leg = env_of("env=mjcf", f"env.xml_file={tmp_path / 'one_leg.xml'}", "env.locomotion.main_body=base",
+                     "env.locomotion.heading=-x").unwrapped
+    assert len(one_leg.feet) == 1 and one_leg.foot_corners is None  # no pair figures
+
+
 def test_height_sweep_writes_a_csv_and_a_success_curve(step_run, tmp_path):
-    evaluate.main([f"run={step_run}", "episodes=1", "heights=0,0.1,0.2", f"out={tmp_path}"])
+    evaluate.main([f"run={step_run}", "episodes=2", "heights=0,0.1,0.2", f"out={tmp_path}"])
     rows = list(csv.DictReader(open(tmp_path / "height_sweep.csv")))
     assert [float(r["step_height_m"]) for r in rows] == [0.0, 0.1, 0.2]
-    assert all(0.0 <= float(r["success_rate"]) <= 1.0 for r in rows)
+    assert all(0.0 <= float(r["success_rate"]) <= float(r["crossed_at_end_rate"]) for r in rows)
+    assert all(float(r["foot_contact_share LF_foot"]) >= 0 and "diagonal_pairs_together" in r for r in rows)
+    episodes = list(csv.DictReader(open(tmp_path / "height_sweep_episodes.csv")))  # a row per episode
+    assert [(float(e["step_height_m"]), int(e["seed"])) for e in episodes] == [
+        (h, s) for h in (0, 0.1, 0.2) for s in (0, 1)]
+    for row in rows:
+        mine = [e for e in episodes if e["step_height_m"] == row["step_height_m"]]
+        assert float(row["success_rate"]) == np.mean([e["success"] == "True" for e in mine])
+        assert float(row["terminated_share"]) == np.mean([e["terminated"] == "True" for e in mine])
+    saved = json.loads((tmp_path / "height_sweep.json").read_text())
+    assert [h["step_height_m"] for h in saved["heights"]] == [0.0, 0.1, 0.2] and saved["seed"] == 0
     assert (tmp_path / "height_sweep.png").read_bytes()[:4] == b"\x89PNG"

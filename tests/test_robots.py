@@ -101,6 +101,11 @@ def test_init_from_transfers_weights_stats_and_optimizer(tiny_cfg, tmp_path):
     assert target.frames == 0  # a new run: counters start fresh
     summary = target.train()
     assert summary["env"] == "mjcf:quadruped_step.xml" and "success_rate" in summary
+    # the last eval's per-foot gait figures, in the model's foot order
+    assert summary["feet"] == ["LF_foot", "RF_foot", "LH_foot", "RH_foot"]
+    assert len(summary["foot_contact_share"]) == len(summary["touchdown_frequency"]) == 4
+    assert all(0 <= summary[key] <= 1 for key in ("diagonal_pairs_together", "same_side_pairs_together",
+                                                  "same_end_pairs_together") if summary[key] is not None)
 
 
 def test_init_from_refuses_what_does_not_fit(tiny_cfg, tmp_path):

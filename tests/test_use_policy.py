@@ -5,6 +5,7 @@ import re
 import subprocess
 import sys
 
+import imageio.v2 as imageio
 import pytest
 import torch
 from matplotlib.container import ErrorbarContainer
@@ -48,6 +49,56 @@ def test_evaluate_cli_writes_json_and_video(trained_run):
     video = trained_run / "eval" / "best.mp4"
     assert video.stat().st_size > 1000
     assert video.read_bytes()[4:8] == b"ftyp"  # an mp4 container
+    # real time: InvertedPendulum's control runs at 25 Hz, so a frame per step, written at 25 fps
+    assert data["video"]["episodes"] == [0] and data["video"]["every"] == 1 and data["video"]["fps"] == 25
+    reader = imageio.get_reader(video)
+    assert reader.count_frames() == data["video"]["frames"] == data["lengths"][0]
+    assert reader.get_meta_data()["fps"] == 25 and "25 fps" in result.stdout
+
+
+def test_evaluate_films_the_episodes_asked_up_to_the_length_asked(trained_run, tmp_path):
+    result = run_cli(f"run={trained_run}", "episodes=3", "video_episodes=1,2", "video_length=0.2", f"out={tmp_path}",
+                     module="ppo_torchrl.evaluate")  # video=true implied
+    assert result.returncode == 0, result.stderr[-2000:]
+    data = json.loads((tmp_path / "eval.json").read_text())
+    lengths, video = data["lengths"], data["video"]
+    assert video["episodes"] == ([1] if lengths[1] >= 5 else [1, 2])  # 0.2 s at 25 fps: 5 frames in all
+    assert video["frames"] == imageio.get_reader(tmp_path / "best.mp4").count_frames() == min(5, lengths[1] + lengths[2])
+    for args, expected in [(["video_episodes=3"], "video_episodes=3: expected episode numbers in 0..2"),
+                           (["video_episodes=0,x"], "video_episodes=0,x"),
+                           (["video_length=0"], "video_length=0: expected the video's length in seconds > 0")]:
+        result = run_cli(f"run={trained_run}", "episodes=3", *args, f"out={tmp_path}", module="ppo_torchrl.evaluate")
+        assert result.returncode == 2 and "Traceback" not in result.stderr
+        assert expected in result.stderr.strip().splitlines()[-1]
+
+
+def test_video_follows_the_robot_at_real_time(tmp_path):
+    """Gymnasium's Hopper, moved 10 m along x while filmed: it stays in frame (its `track` camera), and a
+    97-step episode at 125 Hz (a frame per 4 steps, 31.25 fps) lasts its 0.776 s of simulated time."""
+    from conftest import compose_config
+
+    from ppo_torchrl.envs import gym_make_kwargs, make_gym_env
+    from ppo_torchrl.evaluate import Filming
+
+    cfg = compose_config(["env=Hopper-v4"])
+    assert gym_make_kwargs(cfg.env, "rgb_array")["camera_name"] == "track"
+    env = make_gym_env(cfg.env, "rgb_array", width=160, height=120)
+    film = Filming(tmp_path / "hopper.mp4", env, which=[0])
+    env.reset(seed=0)
+    callback = film.start(0)  # the reset: step 0
+    for _ in range(96):  # steps 1..96 of 97: torchrl's rollout calls back after each step but the last
+        env.step(env.action_space.sample() * 0)
+        env.unwrapped.data.qpos[0] += 0.1
+        callback()
+    video = film.close()
+    env.close()
+    assert (video["every"], video["fps"], video["frames"]) == (4, 31.25, 24)
+    assert abs(video["seconds"] / (97 * env.unwrapped.dt) - 1) < 0.05
+    frames = [frame for frame in imageio.get_reader(tmp_path / "hopper.mp4")]  # (list() asks its len: inf)
+    assert len(frames) == 24
+    rgb = frames[-1].astype(int)  # the hopper's orange body, 9.6 m from where it started
+    orange = (rgb[..., 0] > 90) & (rgb[..., 0] - rgb[..., 1] > 35) & (rgb[..., 1] - rgb[..., 2] > 15)
+    assert orange.sum() > 20  # 74 here; 0 from the free camera Gymnasium renders from unless told
 
 
 def test_eval_progress_only_when_asked_or_slow(trained_run, capsys):
@@ -62,6 +113,10 @@ def test_eval_progress_only_when_asked_or_slow(trained_run, capsys):
     slow.start -= 6  # an eval running for 6 s already: past the quiet period, so it reports
     slow.update(1)
     assert capsys.readouterr().err == "eval: 1/4 episodes, 6 s elapsed, ETA 18 s\n"
+    filmed = EpisodeProgress(4, progress=True, tty=False)
+    filmed.start -= 6  # 4 of the 6 s spent filming episode 1, and 1.5 s of filming still to come
+    filmed.update(1, film_s=4.0, film_left_s=1.5)
+    assert capsys.readouterr().err == "eval: 1/4 episodes, 6 s elapsed, ETA 8 s\n"  # (6 - 4) x 3 + 1.5
     terminal = EpisodeProgress(2, progress=True, tty=True)
     terminal.update(1)
     terminal.update(2)  # one updating line, erased when the eval ends
