@@ -16,8 +16,11 @@ if "pandas" not in sys.modules and importlib.util.find_spec("pandas") is None:
 # `python -m ppo_torchrl[.evaluate|.export|.report]` imports this package first, while argv[0] is
 # still "-m": a Ctrl-C during the heavy imports that follow is one line, not a traceback.
 if sys.argv[:1] == ["-m"]:
+    from ppo_torchrl.cli import check_interpreter
+    from ppo_torchrl.errors import guarded
     from ppo_torchrl.signals import install_for_startup
 
     install_for_startup()
+    guarded(check_interpreter)  # the system Python, not the project's: one line before the heavy imports fail
 
 __version__ = "0.1.0"

@@ -33,6 +33,10 @@ INFO_VALUES = ("all", "config", "defaults", "defaults-tree", "plugins", "searchp
 # may hold (a quote, a space, non-ASCII) reaches the app as typed, run after run and on resume.
 PATH_KEYS = ("resume", "init_from", "hydra.run.dir", "hydra.sweep.dir")
 PATH_ENV = "PPO_TORCHRL_PATH_{}"
+# A sweep job's dir is <num>_<the overrides that vary> (conf/config.yaml: hydra.sweep.subdir); prepare() tells
+# Hydra which keys do not vary through this list.
+EXCLUDE_KEYS = "hydra.job.config.override_dirname.exclude_keys"
+SWEEP = {}  # the sweep dir this command claimed (prepare), for the line that ends the sweep
 
 
 def main(cfg) -> float:
@@ -63,7 +67,7 @@ def _run_job(cfg) -> dict:
     multirun = HydraConfig.get().mode.name == "MULTIRUN"
     rundir.claim(run_dir, resume=bool(cfg.resume), what="job" if multirun else "run")
     try:
-        return train(cfg, run_dir, state)
+        return train(cfg, run_dir, state, next_steps=not multirun)  # a sweep ends with its report command
     finally:
         rundir.rollback(run_dir)  # a job refused before it started training leaves its dir as it was
 
@@ -117,6 +121,26 @@ def check_resume(resume: str, overrides: list[str]) -> Path:
     return run_dir
 
 
+def run_name(experiment, env_choice, env_id, xml_file) -> str:
+    """What a run dir is named by (conf/config.yaml: hydra.run.dir): the preset, else the env file
+    (quadruped_step), else for env=gym the id, for env=mjcf the model file (robot for robot.xml)."""
+    if experiment is not None:
+        return str(experiment)
+    if env_choice == "gym":
+        return str(env_id)
+    if env_choice == "mjcf" and xml_file:
+        return Path(str(xml_file)).stem
+    return str(env_choice)
+
+
+def register_resolvers() -> None:
+    from omegaconf import OmegaConf
+
+    import ppo_torchrl.config  # noqa: F401  (registers the schemas and their resolvers)
+
+    OmegaConf.register_new_resolver("ppo.run_name", run_name, replace=True)
+
+
 def compose(overrides: list[str], with_hydra: bool = False):
     """The config as Hydra will compose it (with its hydra node: launcher, sweeper, dirs, if asked);
     a bad override is one line, not Hydra's report."""
@@ -125,7 +149,7 @@ def compose(overrides: list[str], with_hydra: bool = False):
     from hydra.errors import HydraException
     from omegaconf.errors import OmegaConfBaseException
 
-    import ppo_torchrl.config  # noqa: F401  (registers the schemas)
+    register_resolvers()
 
     if not with_hydra:
         overrides = [a for a in overrides if not a.lstrip("+~").startswith(("hydra.", "hydra/"))]
@@ -214,6 +238,46 @@ def check_stored_study(study, params) -> str:
     return f" ({len(stale)} left running by an interrupted sweep marked failed)" if stale else ""
 
 
+def show_job(job: list[str], resolve: bool) -> None:
+    """`--cfg job`: the composed config as Hydra prints it, less the keys the chosen env, loss and advantage
+    do not read (a first comment line names them); then exit 0."""
+    from omegaconf import OmegaConf, open_dict, read_write
+    from omegaconf.errors import OmegaConfBaseException
+
+    from ppo_torchrl.startup import not_applicable
+
+    cfg = compose(job)
+    hidden = not_applicable(cfg)
+    for key in hidden:
+        parent, _, leaf = key.rpartition(".")
+        node = OmegaConf.select(cfg, parent)
+        with read_write(node), open_dict(node):
+            del node[leaf]
+    names = ", ".join(f"{key}.*" if key.startswith("env.") else key for key in hidden)
+    try:
+        text = OmegaConf.to_yaml(cfg, resolve=resolve)
+    except OmegaConfBaseException as exc:  # an interpolation that fails with --resolve
+        raise ConfigError(one_line(exc)) from exc
+    left_out = f"# left out, as this env, loss and advantage do not read them: {names}\n" if hidden else ""
+    sys.stdout.write(left_out + text)  # one write: a reader that stops early (| head) gets no broken pipe mid-way
+    raise SystemExit(0)
+
+
+def job_dirs(overrides: list[str], basic: bool) -> list[str]:
+    """Hydra overrides that name each sweep job's dir by the overrides that vary (conf/config.yaml:
+    hydra.sweep.subdir): the keys given one value are excluded. With none that varies, and for an Optuna
+    trial (values of many digits, in the study and the job's .hydra/overrides.yaml), the job number alone."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    if {o.split("=", 1)[0].lstrip("+~") for o in hydra_overrides(overrides)} & {"hydra.sweep.subdir", EXCLUDE_KEYS}:
+        return []  # the user's own
+    parsed = [o for o in OverridesParser.create().parse_overrides(overrides) if not o.is_hydra_override()]
+    if not basic or not any(o.is_sweep_override() for o in parsed):
+        return ["hydra.sweep.subdir=${hydra.job.num}"]
+    fixed = [repr(o.key_or_group) for o in parsed if not o.is_sweep_override()]
+    return [f"{EXCLUDE_KEYS}=[{','.join(fixed)}]"]
+
+
 def dry_run(flags: list[str], overrides: list[str]) -> list[str]:
     """`-m ... --cfg job|hydra|all` (or `--info`), which Hydra refuses ("Only one of --run, --multirun,
     --cfg, --info ..."): print the launcher and the jobs, and return the arguments that make Hydra
@@ -285,7 +349,11 @@ def prepare(argv: list[str]) -> list[str]:
     if any(f in INFO_FLAGS for f in flags):  # print or inspect: check the config, write nothing
         for job in jobs:
             compose(job)
-        return dry_run(flags, overrides) if multirun else argv
+        shown = dry_run(flags, overrides) if multirun else argv
+        cfg_type = next((flags[i + 1] for i, f in enumerate(flags[:-1]) if f in ("--cfg", "-c")), None)
+        if cfg_type == "job" and not {"--package", "-p", "--info", "-i"} & set(flags):
+            show_job(jobs[0], resolve="--resolve" in flags)
+        return shown
     if resume and not multirun:
         run_dir = check_resume(resume, overrides)
         rundir.claim(run_dir, resume=True)
@@ -300,7 +368,9 @@ def prepare(argv: list[str]) -> list[str]:
             announce_study(hydra_cfg)
         sweep_dir = Path(hydra_value(hydra_cfg, "hydra.sweep.dir"))
         rundir.claim(sweep_dir, overwrite=overwrite, what="sweep")
-        return with_override(argv, "hydra.sweep.dir", sweep_dir)
+        SWEEP["dir"] = sweep_dir
+        basic = hydra_cfg.hydra.sweeper._target_.endswith(".BasicSweeper")
+        return with_override(argv, "hydra.sweep.dir", sweep_dir) + job_dirs(overrides, basic)
     run_dir = Path(hydra_value(hydra_cfg, "hydra.run.dir"))
     rundir.claim(run_dir, overwrite=overwrite)
     signals.ON_DISK.run_dir = run_dir
@@ -329,18 +399,43 @@ def one_line(exc: BaseException) -> str:
     return message
 
 
+def sweep_done(sweep_dir: Path) -> str:
+    """The line that ends a sweep: how many runs finished, where, and the command that compares them."""
+    import json
+    import shlex
+
+    from ppo_torchrl.cli import python_command, shown_path
+
+    statuses = []
+    for summary in sorted(sweep_dir.glob("*/summary.json")):
+        try:
+            statuses.append(json.loads(summary.read_text()).get("status"))
+        except (OSError, ValueError, AttributeError):
+            statuses.append(None)
+    shown = shown_path(sweep_dir)
+    return (f"sweep: {statuses.count('finished')} of {len(statuses)} runs finished in {shown}; compare them: "
+            f"{python_command()} -m ppo_torchrl.report {shlex.quote(shown)}")
+
+
 def cli() -> None:
+    from ppo_torchrl.cli import check_interpreter
+
+    check_interpreter()  # the system Python of a checkout: one line that names the right one
     import hydra
 
-    import ppo_torchrl.config  # noqa: F401  (registers the schemas)
-
     from ppo_torchrl import rundir
+    from ppo_torchrl.loggers import quiet_mujoco
 
+    quiet_mujoco()  # from the first model the command's check compiles
+
+    register_resolvers()
     sys.argv = [sys.argv[0]] + prepare(sys.argv[1:])
     try:
         hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")(main)()
     finally:  # a sweep dir whose every job was refused, or a run stopped before it started: as it was
         rundir.finish()
+    if SWEEP:
+        print(sweep_done(SWEEP["dir"]), file=sys.stderr, flush=True)
 
 
 if __name__ == "__main__":

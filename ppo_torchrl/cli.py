@@ -1,12 +1,21 @@
-"""`key=value` arguments for the small entry points (evaluate, export), checked like Hydra's."""
+"""`key=value` arguments for the small entry points (evaluate, export), checked like Hydra's; `run=latest`;
+the commands a finished run suggests; the check that the app runs on the project's Python."""
 
 from __future__ import annotations
 
+import json
+import os
+import shlex
+import sys
+from pathlib import Path
 from typing import Any, Dict, Optional, Tuple
 
 from ppo_torchrl.errors import ConfigError
 
 TRUE, FALSE = {"true", "1", "yes"}, {"false", "0", "no"}
+LATEST = "latest"  # run=latest: the newest run dir under OUTPUTS; run=latest/<env>: the newest of that env
+OUTPUTS = Path("outputs")  # where runs go by default (conf/config.yaml: hydra.run.dir, hydra.sweep.dir)
+NEEDS = ("hydra", "omegaconf", "torch", "torchrl", "gymnasium", "mujoco")  # what a wrong interpreter lacks
 
 
 def parse_args(argv: list[str], spec: Dict[str, Any], usage: str, help: Optional[Dict[str, str]] = None,
@@ -54,10 +63,78 @@ def print_help(usage: str, arguments: Dict[str, Tuple[str, Any]], about: str = "
 
 def run(main) -> None:
     """Run an entry point's main(argv) through the one error path (errors.py), signals included."""
-    import sys
-
-    from ppo_torchrl import signals
     from ppo_torchrl.errors import guarded
+    from ppo_torchrl.signals import install
 
-    signals.install()
-    guarded(main, sys.argv[1:])
+    def checked(argv: list[str]):
+        check_interpreter()
+        from ppo_torchrl.loggers import quiet_mujoco
+
+        quiet_mujoco()
+        return main(argv)
+
+    install()
+    guarded(checked, sys.argv[1:])
+
+
+def resolve_run(arg: str) -> Path:
+    """A run dir argument as a path: `latest` is the newest run dir under outputs/ (the newest summary.json of a
+    dir this app made), `latest/<env>` the newest of that env (summary.json's env, or its model file's name:
+    latest/quadruped_step); a path that exists is itself. Says on stderr which run `latest` picked."""
+    name, _, env = arg.partition("/")
+    if name != LATEST or Path(arg).exists():
+        return Path(arg)
+    from ppo_torchrl.rundir import MANIFEST
+
+    runs, envs = [], set()
+    for root, dirs, files in os.walk(OUTPUTS):
+        if "summary.json" not in files:
+            continue
+        dirs[:] = []  # a run dir holds no other run
+        summary = Path(root) / "summary.json"
+        if not (Path(root) / MANIFEST).is_file():
+            continue
+        try:
+            info = json.loads(summary.read_text())
+        except (OSError, ValueError):
+            continue
+        label = str(info.get("env"))
+        envs.add(label)
+        if env and env not in (label, Path(label.partition(":")[2]).stem):
+            continue
+        runs.append((summary.stat().st_mtime, Path(root), info))
+    if not runs:
+        where = f"{OUTPUTS}/ (in {Path.cwd()})"
+        if env and envs:
+            raise ConfigError(f"{arg}: no run of {env} under {where}; its runs are of {', '.join(sorted(envs))}")
+        raise ConfigError(f"{arg}: no run dir under {where}; give the run dir itself")
+    _, run_dir, info = max(runs, key=lambda run: run[0])
+    print(f"{arg}: {run_dir} ({info.get('env')}, {info.get('status')} at {info.get('frames', 0):,} frames)",
+          file=sys.stderr, flush=True)
+    return run_dir
+
+
+def shown_path(path) -> str:
+    """A path as a command shows it: relative to the working dir when inside it, else as it is."""
+    relative = os.path.relpath(path) if os.path.isabs(path) else str(path)
+    return relative if not relative.startswith("..") else str(path)
+
+
+def python_command() -> str:
+    """The interpreter running this, as a command to paste."""
+    return shlex.quote(shown_path(sys.executable or "python"))
+
+
+def check_interpreter() -> None:
+    """The app's packages must import: a checkout's system Python has none of them (one line, exit 2)."""
+    import importlib.util
+
+    missing = next((name for name in NEEDS if importlib.util.find_spec(name) is None), None)
+    if missing is None:
+        return
+    spec = getattr(sys.modules.get("__main__"), "__spec__", None)
+    module = spec.name.removesuffix(".__main__") if spec is not None else "ppo_torchrl"
+    venv = Path(__file__).resolve().parent.parent / ".venv" / "bin" / "python"
+    use = shlex.quote(os.path.relpath(venv)) if venv.is_file() else ".venv/bin/python (make setup makes it)"
+    raise ConfigError(f"{sys.executable} has no '{missing}' package: it is not the project's Python; run "
+                      f"{use} -m {module} ... (or make train)")

@@ -65,16 +65,16 @@ def export_policy(cfg, ac: ActorCritic, obs_stats: Optional[dict], path: Path) -
 
 def main(argv: list[str]) -> Path:
     from ppo_torchrl.checkpoint import load_policy
-    from ppo_torchrl.cli import parse_args
+    from ppo_torchrl.cli import parse_args, resolve_run
     from ppo_torchrl.rundir import is_run, record, unwritable
 
     usage = "python -m ppo_torchrl.export run=<run dir> [checkpoint=best|last|<file>]"
-    help = {"run": "the run dir whose policy is exported; writes <run dir>/policy.pt",
+    help = {"run": "the run dir whose policy is exported (or latest, latest/<env>); writes <run dir>/policy.pt",
             "checkpoint": "best, last, or a checkpoint file"}
     about = ("Writes the policy as TorchScript: a raw observation in, the deterministic action within the bounds\n"
              "out, normalization baked in; it runs with torch alone: torch.jit.load('policy.pt')(obs).")
     args = parse_args(argv, {"run": None, "checkpoint": "best"}, usage, help, about)
-    run_dir = Path(args["run"])
+    run_dir = resolve_run(args["run"])  # run=latest[/<env>]: the newest run dir under outputs/
     cfg, ac, state = load_policy(run_dir, args["checkpoint"])
     why = unwritable(run_dir)
     if why:

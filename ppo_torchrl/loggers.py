@@ -27,6 +27,32 @@ COLUMNS = [
     "env/terrain_level", "env/terrain_success",  # a step env's curriculum (collector.env_metrics)
 ]
 EXTRA = {"tensorboard": "tensorboard", "wandb": "wandb", "mlflow": "mlflow-skinny"}
+# MuJoCo warnings about a model file we ship or Gymnasium does, which the user can do nothing about
+MUJOCO_NOISE = ("settotalmass",)  # in Gymnasium's half_cheetah.xml, which MuJoCo now deprecates
+
+
+def job_tag() -> str:
+    """`[#3] ` in a sweep's job 3 (Hydra's job number, as its launch lines give it), so that the lines of jobs
+    running in parallel say whose they are; '' in a single run."""
+    try:
+        from hydra.core.hydra_config import HydraConfig
+    except ImportError:
+        return ""
+    if not HydraConfig.initialized() or HydraConfig.get().mode.name != "MULTIRUN":
+        return ""
+    return f"[#{HydraConfig.get().job.num}] "
+
+
+def quiet_mujoco() -> None:
+    """MuJoCo warnings on stderr as one line each, without those in MUJOCO_NOISE (which MuJoCo's own handler
+    prints once per model compiled, and appends to MUJOCO_LOG.TXT in the working dir)."""
+    import mujoco
+
+    def warn(message: str) -> None:
+        if not any(noise in message for noise in MUJOCO_NOISE):
+            print(f"MuJoCo warning: {message.strip()}", file=sys.stderr, flush=True)
+
+    mujoco.set_mju_user_warning(warn)
 
 
 def make_logger(cfg, run_dir: Path, run_name: str):
@@ -129,13 +155,14 @@ class Progress:
         self.total = total_frames
         self.every_s = every_s
         self.tty = sys.stdout.isatty() if tty is None else tty
+        self.tag = job_tag()  # a sweep job's lines start with its number
         self._last = -math.inf  # the first update always prints
         self.bar = None
         if self.tty:
             from tqdm import tqdm
 
             self.bar = tqdm(total=total_frames, initial=start_frames, unit="frame", unit_scale=True,
-                            dynamic_ncols=True, smoothing=0.1)
+                            dynamic_ncols=True, smoothing=0.1, desc=self.tag.strip() or None)
 
     def update(self, row: dict, frames_done: int, force: bool) -> None:
         stats = {"sps": f"{row['sps']:.0f}"}
@@ -147,7 +174,8 @@ class Progress:
             self.bar.update(frames_done)
             self.bar.set_postfix(stats, refresh=False)
             if "eval" in stats:
-                self.bar.write(f"eval at {row['frames']} frames: {row['eval/return_mean']:.1f} +- {row['eval/return_std']:.1f}")
+                self.bar.write(f"{self.tag}eval at {row['frames']} frames: {row['eval/return_mean']:.1f} +- "
+                               f"{row['eval/return_std']:.1f}")
             return
         now = time.perf_counter()
         if force or "eval" in stats or now - self._last >= self.every_s:
@@ -159,7 +187,7 @@ class Progress:
             if "eval" in stats:
                 parts.append(f"eval {row['eval/return_mean']:8.1f} +- {row['eval/return_std']:.1f}")
             parts.append(f"eta {eta / 60:5.1f} min")
-            print(" | ".join(parts), flush=True)
+            print(self.tag + " | ".join(parts), flush=True)
 
     def close(self) -> None:
         if self.bar is not None:

@@ -120,10 +120,10 @@ T95 = {1: 12.71, 2: 4.30, 3: 3.18, 4: 2.78, 5: 2.57, 6: 2.45, 7: 2.36, 8: 2.31, 
 
 
 def sweep_runs(sweep_dir: Path):
-    """(finished runs grouped by their overrides minus seed, lines about the runs left out)."""
+    """(finished runs grouped by their overrides minus seed (a sorted tuple), lines about the runs left out)."""
     import json
 
-    groups: Dict[str, list] = {}
+    groups: Dict[tuple, list] = {}
     skipped = []
     for job in sorted(p for p in Path(sweep_dir).iterdir() if p.is_dir() and not p.name.startswith(".")):
         summary, overrides = job / "summary.json", job / ".hydra" / "overrides.yaml"
@@ -137,7 +137,7 @@ def sweep_runs(sweep_dir: Path):
         from omegaconf import OmegaConf
 
         args = OmegaConf.load(overrides) if overrides.exists() else []
-        key = " ".join(sorted(a for a in args if not a.split("=")[0].lstrip("+~") == "seed")) or "(defaults)"
+        key = tuple(sorted(a for a in args if not a.split("=")[0].lstrip("+~") == "seed"))
         groups.setdefault(key, []).append((job, s))
     return groups, skipped
 
@@ -157,7 +157,9 @@ def plot_sweep(sweep_dir: Path) -> List[Path]:
         raise ConfigError(f"{sweep_dir}: no finished runs to report")
     fig, ax = plt.subplots(figsize=(10, 6), constrained_layout=True)
     rows = []
+    common = set.intersection(*(set(key) for key in groups))  # the legend shows what varies, the title the rest
     for key, runs in sorted(groups.items()):
+        varying = " ".join(a for a in key if a not in common) or ("all runs" if len(groups) == 1 else "(defaults)")
         curves = [read_metrics(job / "metrics.csv") for job, _ in runs]
         grid = np.asarray(max((c["frames"] for c in curves), key=len))
         ys = np.stack([np.interp(grid, c["frames"], np.nan_to_num(np.asarray(c["train/return_last100"]), nan=0.0))
@@ -165,19 +167,26 @@ def plot_sweep(sweep_dir: Path) -> List[Path]:
         mean = ys.mean(0)
         n = len(runs)
         half = T95.get(n - 1, 1.96) * ys.std(0, ddof=1) / np.sqrt(n) if n > 1 else np.zeros_like(mean)
-        ax.plot(grid, mean, label=f"{key} (n={n})")
+        ax.plot(grid, mean, label=f"{varying} (n={n})")
         ax.fill_between(grid, mean - half, mean + half, alpha=0.2)
         final = np.asarray([s["train_return_last100"] for _, s in runs], float)
         evals = np.asarray([s["eval_return_mean"] if s["eval_return_mean"] is not None else np.nan for _, s in runs])
         rows.append({
-            "group": key, "seeds": " ".join(str(s["seed"]) for _, s in sorted(runs, key=lambda r: r[1]["seed"])),
+            "group": " ".join(key) or "(defaults)",
+            "seeds": " ".join(str(s["seed"]) for _, s in sorted(runs, key=lambda r: r[1]["seed"])),
             "n": n, "frames": int(np.min([s["frames"] for _, s in runs])),
             # +- is the sample std over seeds (ddof=1), 0 for a single run
             "train_return_mean": final.mean(), "train_return_std": final.std(ddof=1) if n > 1 else 0.0,
             "eval_return_mean": np.nanmean(evals), "eval_return_std": np.nanstd(evals, ddof=1) if n > 1 else 0.0,
             "sps": float(np.mean([s["sps"] for _, s in runs])),
         })
-    ax.set(xlabel="frames", ylabel="train return (last 100 episodes, raw)", title=f"{Path(sweep_dir).name}: mean and 95% CI over seeds")
+    import textwrap
+
+    envs = sorted({str(s.get("env")) for runs in groups.values() for _, s in runs})
+    title = f"{', '.join(envs)}: train return, mean and 95% CI over seeds"
+    if common:
+        title += "\n" + textwrap.fill("every run: " + " ".join(sorted(common)), 110)
+    ax.set(xlabel="frames", ylabel="train return (last 100 episodes, raw)", title=title)
     ax.grid(alpha=0.3)
     ax.legend(loc="best", fontsize=8)
     png = Path(sweep_dir) / "sweep_report.png"
@@ -211,7 +220,9 @@ def main(argv: List[str]) -> List[Path]:
                    "95% CI over seeds) and final returns per group of runs that differ only in seed.")
     if len(argv) != 1:
         raise ConfigError(f"usage: {usage}")
-    target = Path(argv[0])
+    from ppo_torchrl.cli import resolve_run
+
+    target = resolve_run(argv[0].removeprefix("run="))  # [run=]latest[/<env>]: the newest run dir under outputs/
     if not target.is_dir():
         raise ConfigError(f"{target} is not a directory")
     why = unwritable(target)

@@ -12,6 +12,7 @@ claims a checkpoint that is not there.
 from __future__ import annotations
 
 import os
+import shlex
 import signal
 import sys
 import threading
@@ -34,8 +35,9 @@ class OnDisk:
     def describe(self) -> str:
         if self.checkpoint is not None:
             done = self.total_frames is not None and self.checkpoint_frames >= self.total_frames
-            then = (f"every frame is trained; evaluate it with: python -m ppo_torchrl.evaluate run={self.run_dir}"
-                    if done else f"resume with: python -m ppo_torchrl resume={self.run_dir}")
+            run = shlex.quote(str(self.run_dir))
+            then = (f"every frame is trained; evaluate it with: python -m ppo_torchrl.evaluate run={run}"
+                    if done else f"resume with: python -m ppo_torchrl resume={run}")
             return f"the last checkpoint on disk is {self.checkpoint} at frame {self.checkpoint_frames} ({then})"
         # a run stopped before it started leaves no dir (rundir.rollback): nothing to overwrite then
         again = f"; to start again in {self.run_dir} add overwrite=true" if self.run_dir and self.started else ""

@@ -12,10 +12,25 @@ from pathlib import Path
 from omegaconf import OmegaConf
 
 from ppo_torchrl.config import Config
-from ppo_torchrl.envs import env_label
+from ppo_torchrl.envs import MJCF_ID, env_label
+from ppo_torchrl.loggers import job_tag
 
 CONF_DIR = Path(__file__).resolve().parent.parent / "conf"
 NOT_SHOWN = ("env.", "seed", "resume")  # the env is named anyway; the seed and resume dir are the user's
+# loss.<key>: the losses that read it (losses.py); every loss reads the others
+POLICY_GRADIENT = ("clip_ppo", "kl_ppo", "ppo", "a2c")  # reinforce has no entropy bonus nor critic coefficient
+LOSS_KEYS = {"clip_epsilon": ("clip_ppo",), "kl_target": ("kl_ppo",), "kl_beta": ("kl_ppo",),
+             "entropy_coef": POLICY_GRADIENT, "entropy_samples": POLICY_GRADIENT, "critic_coef": POLICY_GRADIENT}
+
+
+def not_applicable(cfg) -> list[str]:
+    """Keys (or whole nodes) of the config that the chosen env, loss and advantage do not read: env.locomotion
+    and env.terrain on an env without a model file (only MJCF robots read them), loss keys of other losses,
+    advantage.lmbda without GAE. Every config still has them (checkpoints hold the whole config)."""
+    mjcf = cfg.env.get("xml_file") or OmegaConf.select(cfg, "env.id", throw_on_missing=False) == MJCF_ID
+    hidden = [] if mjcf else ["env.locomotion", "env.terrain"]
+    hidden += [f"loss.{key}" for key, losses in LOSS_KEYS.items() if cfg.loss.name not in losses]
+    return hidden + (["advantage.lmbda"] if cfg.advantage.name != "gae" else [])
 
 
 def frame_budget(cfg) -> tuple[int, int]:
@@ -41,12 +56,13 @@ def describe_start(cfg, cli_overrides: list[str]) -> str:
         line += f" (collector.total_frames={cfg.collector.total_frames} rounded up)"
     defaults = flatten(OmegaConf.to_container(OmegaConf.structured(Config)))
     users = user_values(cli_overrides)
+    unread = tuple(not_applicable(cfg))
     changed = [f"{key}={show(value)}" for key, value in flatten(OmegaConf.to_container(cfg, resolve=True)).items()
                if key in defaults and value != defaults[key] and not key.startswith(NOT_SHOWN)
-               and not (key in users and users[key] in (value, None))]
+               and not (key in users and users[key] in (value, None)) and key not in unread]
     if not changed:
-        return line + "; the env file/preset changes no defaults"
-    return line + f"; set by the env file/preset: {', '.join(changed)}"
+        return job_tag() + line + "; the env file/preset changes no defaults"
+    return job_tag() + line + f"; set by the env file/preset: {', '.join(changed)}"
 
 
 def user_values(cli_overrides: list[str]) -> dict:
@@ -86,3 +102,41 @@ def show(value) -> str:
 
 def describe_resume(run_dir, frames: int, cfg) -> str:
     return f"resumed {run_dir} at frame {frames:,} of {frame_budget(cfg)[1]:,}"
+
+
+def duration(seconds: float) -> str:
+    """14 s, 3 min 20 s, 2 h 05 min."""
+    seconds = int(round(seconds))
+    if seconds < 60:
+        return f"{seconds} s"
+    if seconds < 3600:
+        return f"{seconds // 60} min {seconds % 60:02d} s"
+    return f"{seconds // 3600} h {seconds % 3600 // 60:02d} min"
+
+
+def describe_end(summary: dict, next_steps: bool = True) -> str:
+    """What a finished run prints last: one line (frames, wall time, final and best eval, where the files
+    are), then the commands to paste next (watch it, plot it, train it on); a sweep's job prints the line only."""
+    import shlex
+
+    from ppo_torchrl.cli import python_command, shown_path
+
+    run_dir, ev = shown_path(summary["run_dir"]), summary.get("eval_return_mean")
+    if ev is not None:
+        result = f"final eval {ev:.1f} +- {summary.get('eval_return_std') or 0.0:.1f}"
+        if summary.get("best_eval_return") is not None:
+            result += f", best {summary['best_eval_return']:.1f}"
+    elif summary.get("train_return_last100") is not None:
+        result = f"no eval; train return (last 100 episodes) {summary['train_return_last100']:.1f}"
+    else:
+        result = "no eval, no finished episode"
+    line = (f"{job_tag()}done: {summary['env']}, {summary['frames']:,} frames in {duration(summary['wall_s'])}; "
+            f"{result}; files in {run_dir}")
+    if not next_steps:
+        return line
+    python, more = python_command(), 2 * summary["frames"]
+    return "\n".join([
+        line, f"next: watch the best checkpoint, plot the run, train it on to {more:,} frames:",
+        f"  {python} -m ppo_torchrl.evaluate {shlex.quote(f'run={run_dir}')} video=true",
+        f"  {python} -m ppo_torchrl.report {shlex.quote(run_dir)}",
+        f"  {python} -m ppo_torchrl {shlex.quote(f'resume={run_dir}')} collector.total_frames={more}"])

@@ -9,6 +9,7 @@ from __future__ import annotations
 import copy
 import math
 import random
+import shlex
 import sys
 import time
 from collections import deque
@@ -229,9 +230,9 @@ class Trainer:
                 if self.evals is not None:  # the evals under way (seconds): their rows as an uninterrupted run has them
                     self.evals.poll(block=True)
                 self.write_summary(status="interrupted")
+                run = shlex.quote(str(self.run_dir))
                 then = (f"every frame is trained; the final eval was skipped (run it with: python -m "
-                        f"ppo_torchrl.evaluate run={self.run_dir})" if last
-                        else f"resume with: python -m ppo_torchrl resume={self.run_dir}")
+                        f"ppo_torchrl.evaluate run={run})" if last else f"resume with: python -m ppo_torchrl resume={run}")
                 raise Interrupted(f"checkpoint at frame {self.frames} saved to {path} ({then})", stop.signum)
             self.write_summary(status="finished" if last else "running")
 
@@ -429,8 +430,13 @@ class Trainer:
             rundir.record(self.run_dir)
 
 
-def train(cfg, run_dir: Path, resume: Optional[dict] = None) -> dict:
+def train(cfg, run_dir: Path, resume: Optional[dict] = None, next_steps: bool = True) -> dict:
+    """Train a run to its end; its last lines say what it reached, where its files are and (next_steps) the
+    commands to paste next."""
+    from ppo_torchrl.loggers import quiet_mujoco
+
+    quiet_mujoco()
     trainer = Trainer(cfg, run_dir, resume)
     summary = trainer.train()
-    print(f"run dir: {run_dir}", file=sys.stderr)
+    print(startup.describe_end(summary, next_steps), file=sys.stderr, flush=True)
     return summary

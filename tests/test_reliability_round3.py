@@ -238,15 +238,21 @@ def test_a_killed_collector_worker_is_one_line_and_a_failed_status(tmp_path):
     args = ["env=InvertedPendulum-v4", "collector.workers=2", "collector.frames_per_batch=256",
             "collector.total_frames=10000000", "eval.every_frames=0", "checkpoint.every_frames=256", "logger=none",
             "compile=false", f"hydra.run.dir={run}"]
-    process = subprocess.Popen([sys.executable, "-m", "ppo_torchrl", *args], cwd=ROOT, stderr=subprocess.PIPE, text=True)
-    deadline = time.time() + 120
-    while time.time() < deadline and not (run / "checkpoints" / "last.pt").exists():
-        time.sleep(0.2)
-    children = subprocess.run(["ps", "-ww", "-o", "pid=,args=", "--ppid", str(process.pid)], capture_output=True,
-                              text=True).stdout.splitlines()
-    workers = [int(line.split()[0]) for line in children if "resource_tracker" not in line]
-    os.kill(workers[-1], signal.SIGKILL)
-    _, err = process.communicate(timeout=120)
+    process = subprocess.Popen([sys.executable, "-m", "ppo_torchrl", *args], cwd=ROOT, stderr=subprocess.PIPE, text=True,
+                               start_new_session=True)
+    try:
+        deadline = time.time() + 120
+        while time.time() < deadline and not (run / "checkpoints" / "last.pt").exists():
+            time.sleep(0.2)
+        children = subprocess.run(["ps", "-ww", "-o", "pid=,args=", "--ppid", str(process.pid)], capture_output=True,
+                                  text=True).stdout.splitlines()
+        workers = [int(line.split()[0]) for line in children if "resource_tracker" not in line]
+        os.kill(workers[-1], signal.SIGKILL)
+        _, err = process.communicate(timeout=120)
+    finally:  # whatever failed above, the run and its workers do not outlive the test
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.wait()
     line = next(l for l in err.splitlines() if l.startswith("error:"))
     assert process.returncode == 1 and f"(pid {workers[-1]}) died (killed by SIGKILL)" in line
     assert "the last checkpoint on disk is" in line and "Traceback" not in err

@@ -72,3 +72,49 @@ def test_resumed_run_says_where_it_resumes_and_its_time_goes_on(tiny_cfg, tmp_pa
     times = [float(row.split(",")[2]) for row in (tmp_path / "metrics.csv").read_text().splitlines()[1:]]
     assert len(times) == 4 and times == sorted(times) and times[2] > state["wall_time"]
     assert summary["wall_s"] >= times[-1]
+
+
+def test_start_line_leaves_out_what_the_chosen_loss_does_not_read():
+    assert "loss.clip_epsilon=0.1" in start_line("env=Hopper-v4")  # Hopper-v4's file sets it for clip_ppo
+    line = start_line("env=Hopper-v4", "loss=kl_ppo")
+    assert "clip_epsilon" not in line and "policy.width=128" in line
+
+
+SUMMARY = {"env": "Hopper-v4", "frames": 1_001_472, "wall_s": 3725.0, "eval_return_mean": 3301.26,
+           "eval_return_std": 12.04, "best_eval_return": 3350.0, "train_return_last100": 3000.0,
+           "run_dir": "/data/runs/my run"}
+
+
+def test_end_lines_say_what_the_run_reached_and_what_to_paste_next():
+    import shlex
+    import sys
+    from pathlib import Path
+
+    from ppo_torchrl.startup import describe_end
+
+    lines = describe_end(SUMMARY).splitlines()
+    assert lines[0] == ("done: Hopper-v4, 1,001,472 frames in 1 h 02 min; final eval 3301.3 +- 12.0, best 3350.0; "
+                        "files in /data/runs/my run")
+    assert len(lines) == 5 and lines[1].startswith("next: ")
+    commands = [shlex.split(line) for line in lines[2:]]
+    assert all(Path(command[0]).absolute() == Path(sys.executable).absolute() for command in commands)  # this Python
+    assert [c[1:] for c in commands] == [
+        ["-m", "ppo_torchrl.evaluate", "run=/data/runs/my run", "video=true"],
+        ["-m", "ppo_torchrl.report", "/data/runs/my run"],
+        ["-m", "ppo_torchrl", "resume=/data/runs/my run", "collector.total_frames=2002944"]]
+    # a sweep's job: the line only (the sweep ends with its report command); no eval: the training return
+    line = describe_end({**SUMMARY, "eval_return_mean": None, "wall_s": 75.4}, next_steps=False)
+    assert line == ("done: Hopper-v4, 1,001,472 frames in 1 min 15 s; no eval; train return (last 100 episodes) "
+                    "3000.0; files in /data/runs/my run")
+
+
+def test_mujocos_deprecation_warning_about_gymnasiums_model_is_not_printed(tmp_path, monkeypatch, capfd):
+    import gymnasium as gym
+
+    from ppo_torchrl.loggers import quiet_mujoco
+
+    monkeypatch.chdir(tmp_path)
+    quiet_mujoco()
+    gym.make("HalfCheetah-v4").close()  # its model sets settotalmass
+    assert "settotalmass" not in capfd.readouterr().err
+    assert not (tmp_path / "MUJOCO_LOG.TXT").exists()

@@ -34,6 +34,7 @@ from torchrl.envs import ObservationNorm, VecNormV2
 from ppo_torchrl.collectors.torchrl_collector import TorchRLCollector
 from ppo_torchrl.envs import make_torchrl_env, torchrl_obs_stats
 from ppo_torchrl.errors import ConfigError, EnvironmentFault
+from ppo_torchrl.loggers import quiet_mujoco
 from ppo_torchrl.models import ActorCritic
 from ppo_torchrl.normalization import ReturnNormalization
 
@@ -53,6 +54,7 @@ def worker_env(env_cfg: dict, clip_actions: bool, gamma: float, num_envs: int, o
     if threading.current_thread() is threading.main_thread():
         for signum in (signal.SIGINT, signal.SIGTERM):
             signal.signal(signum, signal.SIG_IGN)
+    quiet_mujoco()  # a spawned worker is a fresh process: MuJoCo's deprecation notices would print again here
     return make_torchrl_env(OmegaConf.create(env_cfg), clip_actions=clip_actions, gamma=gamma,
                             obs_stats=obs_stats, train=True, device="cpu", num_envs=num_envs)
 
