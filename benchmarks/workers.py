@@ -1,5 +1,5 @@
 """frames/s of one run on one process and on two (collector.workers=2), whole process, and the
-collect/update split that projects more workers (README: "One run on several processes").
+collect/update split that projects more workers (docs/speed.md: "One run on several processes").
 
     .venv/bin/python benchmarks/workers.py [--frames 32768] [--out results/workers]
 
