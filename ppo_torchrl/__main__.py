@@ -234,7 +234,7 @@ def check_stored_study(study, params) -> str:
                                   "hydra.sweeper.study_name=<name>")
     stale = [t for t in trials if t.state == optuna.trial.TrialState.RUNNING]
     for trial in stale:
-        study._storage.set_trial_state(trial._trial_id, optuna.trial.TrialState.FAIL)
+        study.tell(trial.number, state=optuna.trial.TrialState.FAIL)
     return f" ({len(stale)} left running by an interrupted sweep marked failed)" if stale else ""
 
 

@@ -143,3 +143,19 @@ def test_presets_carry_their_documents_settings():
     assert (anymal.loss.critic_coef, anymal.loss.entropy_coef, anymal.env.max_episode_steps) == (1.0, 0.001, 400)
     step = compose_config(["experiment=aidl_anymal_step"])
     assert step.env.xml_file == "quadruped_step.xml" and step.init_from_optimizer and step.optim.lr == 1e-5
+
+
+def test_a_stored_study_with_another_space_is_refused_and_stale_trials_are_failed():
+    """hparams_search on a stored study: another search space is one line (Optuna would fail in the first trial
+    and leave it RUNNING); trials an interrupted sweep left RUNNING are marked failed."""
+    import optuna
+
+    from ppo_torchrl.__main__ import check_stored_study
+    from ppo_torchrl.errors import ConfigError
+
+    study = optuna.create_study(direction="maximize")
+    study.ask({"optim.lr": optuna.distributions.LogUniformDistribution(1e-5, 3e-3)})  # left RUNNING
+    with pytest.raises(ConfigError, match="searched optim.lr over LogUniformDistribution"):
+        check_stored_study(study, {"optim.lr": "tag(log, interval(1e-4, 1e-2))"})
+    assert check_stored_study(study, {"optim.lr": "tag(log, interval(1e-5, 3e-3))"}).startswith(" (1 left running")
+    assert [t.state for t in study.trials] == [optuna.trial.TrialState.FAIL]
