@@ -135,8 +135,8 @@ def check_new_dir(directory: Path, overwrite: bool, what: str = "run") -> None:
         raise ConfigError(f"the {what} dir {directory} is a file; give {key} a directory")
     if not directory.is_dir():
         return
-    if not _files(directory) and not _job_dirs(directory):
-        return  # empty (empty folders only): a new run may use it
+    if not [f for f in _files(directory) if f != LEGACY_LOCK] and not _job_dirs(directory):
+        return  # empty (empty folders, a stale lock file of an earlier version): a new run may use it
     if what == "run":
         foreign, has_run = foreign_files(directory), is_run(directory)
     else:  # a sweep: its own files, and job dirs that are each a run dir (or empty)
@@ -145,6 +145,11 @@ def check_new_dir(directory: Path, overwrite: bool, what: str = "run") -> None:
             if _files(job):
                 foreign += [f"{job.name}/{f}" for f in foreign_files(job)]
         has_run = is_run(directory) or any(is_run(job) for job in _job_dirs(directory))
+    legacy = {"metrics.csv", "summary.json", "checkpoints/last.pt"} & set(foreign)  # what every run wrote
+    if what == "run" and not has_run and legacy and all(OWNED.match(f) for f in foreign):
+        raise ConfigError(f"{directory} holds a run of an earlier version, which listed no files: overwrite=true cannot "
+                          f"tell its files from yours; continue it with resume={directory}, pick a new dir with "
+                          f"{key}=<dir>, or remove it yourself")
     if foreign or not has_run:
         shown = ", ".join(foreign[:3]) + (f" and {len(foreign) - 3} more" if len(foreign) > 3 else "")
         raise ConfigError(f"{directory} is not empty and is not a ppo_torchrl {what} dir (it holds {shown or 'folders'}, "

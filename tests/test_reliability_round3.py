@@ -62,7 +62,13 @@ def eval_csv(run):
     return run
 
 
+def legacy(run):
+    (run / rundir.MANIFEST).unlink()  # a run of an earlier version: no list of its files
+    return run
+
+
 @pytest.mark.parametrize("damage, expected", [
+    (legacy, "holds a run of an earlier version"),
     (user_files, "it holds logs/my_notes.txt, which this app did not write"),
     (eval_csv, "it holds eval/paper_numbers.csv"),
     (only_logs, "is not a ppo_torchrl run dir"),
