@@ -1,9 +1,9 @@
 """Environments: checking an id, the raw Gymnasium env, and the TorchRL `TransformedEnv`.
 
-Two ways to step an env share these builders:
-- `make_gym_env` gives the real Gymnasium MuJoCo env that the fast collector steps directly;
-- `make_torchrl_env` gives `TransformedEnv(GymWrapper(...))` with the TorchRL transforms, used by the
-  `collector.backend=torchrl` pipeline and, with frozen statistics, by evaluation and export checks.
+- `make_gym_env` gives the real Gymnasium MuJoCo env;
+- `make_torchrl_env` gives `TransformedEnv(GymWrapper(...))` with the transforms: the one env of every
+  path (TorchRL's Collector steps it, the fast collector steps its Gymnasium envs with its transforms'
+  statistics, evaluation runs it with frozen statistics).
 """
 
 from __future__ import annotations
@@ -17,24 +17,16 @@ from typing import Optional, Sequence
 import gymnasium as gym
 import numpy as np
 import torch
-from torchrl.envs import (
-    ClipTransform,
-    Compose,
-    DoubleToFloat,
-    GymWrapper,
-    ObservationNorm,
-    RewardClipping,
-    RewardScaling,
-    RewardSum,
-    StepCounter,
-    Transform,
-    TransformedEnv,
-    VecNorm,
-    VecNormV2,
-)
+from torchrl.envs import Compose, GymWrapper, RewardSum, StepCounter, Transform, TransformedEnv
 
 from ppo_torchrl.errors import ConfigError
-from ppo_torchrl.normalization import ReturnNormalization, obs_scale
+from ppo_torchrl.normalization import (
+    ObservationNormalization,
+    RewardNormalization,
+    make_observation_normalizer,
+    make_reward_normalizer,
+)
+from ppo_torchrl.positions import GymEnvs, resumable
 
 # Gymnasium's v4 MuJoCo envs warn on every make that v5 exists; the warning is not actionable here.
 warnings.filterwarnings("ignore", message=".*is out of date.*")
@@ -256,7 +248,8 @@ def _ctrl_bounds_from_force(env: gym.Env, info: MjcfInfo) -> None:
     for i, low, high in info.ctrl_from_force:
         model.actuator_ctrllimited[i] = 1
         model.actuator_ctrlrange[i] = (low, high)
-    env.unwrapped._set_action_space()
+    bounds = model.actuator_ctrlrange.astype(np.float32)  # what MujocoEnv makes its action space of
+    env.unwrapped.action_space = gym.spaces.Box(low=bounds[:, 0], high=bounds[:, 1], dtype=np.float32)
 
 
 def extra_transforms(env_cfg) -> list:
@@ -307,42 +300,6 @@ def env_spec(env_cfg) -> EnvSpec:
     return spec
 
 
-class ResumableReset(gym.Wrapper):
-    """Its next reset() can continue a saved episode instead of starting one: how a resumed run of the
-    torchrl backend picks up each env where its checkpoint left it (simulator state, time-limit
-    counter, RNG and the observation the policy acts on next), as the fast backend does."""
-
-    def __init__(self, env: gym.Env):
-        super().__init__(env)
-        self.pending: Optional[dict] = None
-        self.last_obs: Optional[np.ndarray] = None
-
-    def position(self) -> dict:
-        return {"env": get_env_state(self.env), "obs": self.last_obs.copy()}
-
-    def reset(self, **kwargs):
-        if self.pending is None:
-            self.last_obs, info = self.env.reset(**kwargs)
-            return self.last_obs, info
-        position, self.pending = self.pending, None
-        set_env_state(self.env, position["env"])
-        self.last_obs = position["obs"].copy()
-        return self.last_obs.copy(), {}
-
-    def step(self, action):
-        self.last_obs, reward, terminated, truncated, info = self.env.step(action)
-        return self.last_obs, reward, terminated, truncated, info
-
-
-def _gym_env(env_cfg, render_mode: Optional[str], render_kwargs: dict, resumable: Optional[list],
-             evaluation: bool = False) -> gym.Env:
-    env = make_gym_env(env_cfg, render_mode, evaluation, **render_kwargs)
-    if resumable is not None:
-        env = ResumableReset(env)
-        resumable.append(env)
-    return env
-
-
 def make_torchrl_env(
     env_cfg,
     *,
@@ -353,59 +310,51 @@ def make_torchrl_env(
     render_mode: Optional[str] = None,
     device: str = "cpu",
     num_envs: int = 1,
-    resumable: Optional[list] = None,
+    seed: Optional[int] = None,
     **render_kwargs,
 ) -> TransformedEnv:
-    """`TransformedEnv(GymWrapper(gymnasium env))` with the configured transforms.
+    """`TransformedEnv(GymWrapper(gymnasium env))` with the configured transforms: the card's pipeline,
+    which TorchRL's Collector steps and whose state the fast collector uses (positions.GymEnvs,
+    normalization.ObservationNormalization / RewardNormalization: the one owner of each).
 
-    train=True: running statistics (VecNorm) or ObservationNorm fitted on initial rollouts, and
-    reward normalization, as the collector needs them.
-    train=False: observation statistics frozen from `obs_stats` (mean/var) into an ObservationNorm,
-    rewards left raw: the evaluation env, whose returns are the ones a user compares.
-    resumable: a list that receives each gymnasium env, wrapped in `ResumableReset`.
+    train=True: running statistics (or fixed ones fitted on random rollouts) and reward normalization,
+    as a collector needs them; `obs_stats` (init_from) start them.
+    train=False: observation statistics frozen from `obs_stats`, rewards left raw: the evaluation env,
+    whose returns are the ones a user compares.
+    seed: each env i is reset with seed + i once built, so that everything that follows is reproducible.
     """
     t = env_cfg.transforms
+    gym_envs = [resumable(make_gym_env(env_cfg, render_mode, not train, **render_kwargs)) for _ in range(num_envs)]
+    if seed is not None:
+        for i, env in enumerate(gym_envs):
+            env.reset(seed=seed + i)
+            env.action_space.seed(seed + i)
     # The same gymnasium env the fast collector steps, wrapped (GymEnv(id, frame_skip=...) would take
     # frame_skip as its own action repeat instead of passing it to the MuJoCo env).
     if num_envs == 1:
-        base = GymWrapper(_gym_env(env_cfg, render_mode, render_kwargs, resumable, not train), device=device)
+        base = GymWrapper(gym_envs[0], device=device)
     else:  # one batched env over Gymnasium's vector env: one process, no per-env TensorDict (2.7x SerialEnv)
-        make = functools.partial(_gym_env, env_cfg, render_mode, render_kwargs, resumable, not train)
-        vector = gym.vector.SyncVectorEnv([make] * num_envs, autoreset_mode=gym.vector.AutoresetMode.DISABLED)
+        vector = gym.vector.SyncVectorEnv([functools.partial(lambda e: e, env) for env in gym_envs],
+                                          autoreset_mode=gym.vector.AutoresetMode.DISABLED)
         base = GymWrapper(vector, device=device)
-    transforms = []
+    obs_dim = int(gym_envs[0].observation_space.shape[0])
+    if not train and t.obs_norm != "none" and obs_stats is None:
+        raise ValueError("a frozen observation normalization needs obs_stats")
+    obs_norm = make_observation_normalizer(t, obs_dim, obs_stats, frozen=not train)
+    if train and t.obs_norm == "fixed" and obs_stats is None:  # fitted on an env of its own, then frozen
+        fit_env = make_gym_env(env_cfg)
+        obs_norm.fit_fixed(fit_env, t.obs_norm_init_frames, 0 if seed is None else seed)
+        fit_env.close()
+    transforms = [GymEnvs(gym_envs)]
     if clip_actions:  # Normal head: the env gets the clipped action, the batch keeps the sample
         spec = base.action_spec
         transforms.append(ClipActionToBounds(spec.space.low, spec.space.high))
     # RewardSum and StepCounter see raw rewards: logged returns are never the normalized ones.
-    transforms += [RewardSum(), StepCounter()]
-    obs_norm = None
-    if t.obs_norm == "running" and train:
-        obs_norm = VecNorm(in_keys=["observation"], decay=1.0, eps=t.norm_epsilon, new_api=True,
-                           reduce_batch_dims=True)  # one set of stats shared by all envs
-    elif t.obs_norm == "fixed" and train and obs_stats is None:
-        obs_norm = ObservationNorm(in_keys=["observation"], standard_normal=True)
-    elif t.obs_norm != "none":
-        if obs_stats is None:
-            raise ValueError("a frozen observation normalization needs obs_stats")
-        obs_norm = frozen_observation_norm(obs_stats, t.norm_epsilon)
-    if obs_norm is not None:  # on the float64 observations: the statistics are kept in float64
-        transforms.append(obs_norm)
-        if t.obs_clip is not None:
-            transforms.append(ClipTransform(in_keys=["observation"], low=-t.obs_clip, high=t.obs_clip))
-    transforms.append(DoubleToFloat())
+    transforms += [RewardSum(), StepCounter(), ObservationNormalization(obs_norm)]  # float64 in, float32 out
     transforms += extra_transforms(env_cfg)
     if train:
-        if t.reward_norm == "return":
-            transforms.append(ReturnNormalization(gamma=gamma, clip=None, num_envs=num_envs, epsilon=t.norm_epsilon))
-        elif t.reward_norm == "scale":
-            transforms.append(RewardScaling(loc=0.0, scale=t.reward_scale))
-        if t.reward_norm != "none" and t.reward_clip is not None:
-            transforms.append(RewardClipping(-t.reward_clip, t.reward_clip))
-    env = TransformedEnv(base, Compose(*transforms))
-    if isinstance(obs_norm, ObservationNorm) and not obs_norm.initialized:
-        obs_norm.init_stats(num_iter=t.obs_norm_init_frames, reduce_dim=0, cat_dim=0)
-    return env
+        transforms.append(RewardNormalization(make_reward_normalizer(t, num_envs, gamma)))
+    return TransformedEnv(base, Compose(*transforms))
 
 
 class ClipActionToBounds(Transform):
@@ -423,29 +372,6 @@ class ClipActionToBounds(Transform):
         return torch.maximum(torch.minimum(action, self.high), self.low)
 
 
-def frozen_observation_norm(obs_stats: dict, epsilon: float) -> ObservationNorm:
-    """The stats of a checkpoint ({"mean", "var", "count"}) as a fixed TorchRL ObservationNorm."""
-    loc = torch.as_tensor(np.asarray(obs_stats["mean"]), dtype=torch.float64)
-    scale = torch.as_tensor(obs_scale(obs_stats["var"], epsilon), dtype=torch.float64)
-    return ObservationNorm(loc=loc, scale=scale, in_keys=["observation"], standard_normal=True)
-
-
-def observation_norm(env: TransformedEnv):
-    """The env's observation normalizer (VecNorm or ObservationNorm), or None."""
-    return next((t for t in env.transform if isinstance(t, (VecNormV2, ObservationNorm))), None)
-
-
-def torchrl_obs_stats(norm, count: float) -> Optional[dict]:
-    """Its statistics in the checkpoint's format, read through the public `loc` / `scale`."""
-    if norm is None or (isinstance(norm, VecNormV2) and not norm.initialized):
-        return None
-    loc, scale = norm.loc, norm.scale
-    if isinstance(norm, VecNormV2):  # TensorDicts keyed like the in_keys
-        loc, scale = loc["observation"], scale["observation"]
-    scale = scale.detach().double().numpy()
-    return {"mean": loc.detach().double().numpy().copy(), "var": scale**2, "count": float(count)}
-
-
 def seed_everything(seed: int) -> None:
     import random
 
@@ -456,49 +382,3 @@ def seed_everything(seed: int) -> None:
 
 def episode_seeds(seed: int, n: int) -> Sequence[int]:
     return [seed * 1000 + i for i in range(n)]
-
-
-def _find_wrapper(env: gym.Env, kind: type) -> Optional[gym.Wrapper]:
-    while isinstance(env, gym.Wrapper):
-        if isinstance(env, kind):
-            return env
-        env = env.env
-    return None
-
-
-def get_env_state(env: gym.Env) -> dict:
-    """What a bit-exact continuation of this episode needs: the MuJoCo integration state
-    (qpos, qvel, act, time, warm start), the time-limit counter and the env's RNG."""
-    state = {"np_random": env.unwrapped.np_random.bit_generator.state}
-    if hasattr(env.unwrapped, "get_extra_state"):  # locomotion.py: the step, curriculum, last action, air times
-        state["extra"] = env.unwrapped.get_extra_state()
-    limit = _find_wrapper(env, gym.wrappers.TimeLimit)
-    if limit is not None:
-        state["elapsed_steps"] = limit._elapsed_steps
-    model, data = getattr(env.unwrapped, "model", None), getattr(env.unwrapped, "data", None)
-    if model is not None and data is not None:
-        import mujoco
-
-        spec = mujoco.mjtState.mjSTATE_INTEGRATION
-        physics = np.empty(mujoco.mj_stateSize(model, spec))
-        mujoco.mj_getState(model, data, physics, spec)
-        state["mujoco"] = physics
-    return state
-
-
-def set_env_state(env: gym.Env, state: dict) -> None:
-    env.unwrapped.np_random.bit_generator.state = state["np_random"]
-    limit = _find_wrapper(env, gym.wrappers.TimeLimit)
-    if limit is not None and "elapsed_steps" in state:
-        limit._elapsed_steps = state["elapsed_steps"]
-    if "mujoco" in state:
-        import mujoco
-
-        model, data = env.unwrapped.model, env.unwrapped.data
-        spec = mujoco.mjtState.mjSTATE_INTEGRATION
-        if state["mujoco"].shape[0] != mujoco.mj_stateSize(model, spec):
-            raise ConfigError("the checkpoint's simulator state does not fit this env's model")
-        mujoco.mj_setState(model, data, state["mujoco"], spec)
-        mujoco.mj_forward(model, data)
-    if "extra" in state and hasattr(env.unwrapped, "set_extra_state"):
-        env.unwrapped.set_extra_state(state["extra"])

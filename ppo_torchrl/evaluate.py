@@ -1,7 +1,7 @@
 """Deterministic evaluation on a separate TorchRL env with frozen normalization statistics.
 
-The eval env is `TransformedEnv(GymWrapper)` with an `ObservationNorm` holding the training stats (no
-updates) and raw rewards, and the actor runs in DETERMINISTIC exploration mode (the mean, squashed
+The eval env is the training pipeline's `TransformedEnv(GymWrapper)` with the normalization frozen at the
+training stats (no updates) and raw rewards, and the actor runs in DETERMINISTIC exploration mode (the mean, squashed
 or clipped to the bounds). It shares no state with the training envs.
 
     python -m ppo_torchrl.evaluate run=<run dir> [checkpoint=best|last|<file>] [episodes=10] [video=false]
@@ -31,6 +31,7 @@ import torch
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
 from ppo_torchrl.envs import env_label, episode_seeds, make_torchrl_env
+from ppo_torchrl.positions import GymEnvs
 from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.locomotion import FOOT_PAIRS, LocomotionEnv
 from ppo_torchrl.models import ActorCritic, deterministic_policy
@@ -188,7 +189,7 @@ def run_episodes(cfg, ac: ActorCritic, obs_stats: Optional[dict], seeds: Sequenc
     mode = ExplorationType.DETERMINISTIC if deterministic else ExplorationType.RANDOM
     returns, lengths, distances, gaits, crossed, heights = [], [], [], [], [], []
     terminated, ends = [], []  # per episode: ended by the env (not its time limit), and why (locomotion envs)
-    gym_env = env.base_env._env
+    gym_env = next(t for t in env.transform if isinstance(t, GymEnvs)).gym_envs[0]
     film = (Filming(video_path, gym_env, [e for e in video_episodes if 0 <= e < episodes], video_length)
             if video_path is not None else None)
     video = None

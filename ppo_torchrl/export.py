@@ -14,38 +14,31 @@ import copy
 from pathlib import Path
 from typing import Optional
 
-import numpy as np
 import torch
 from torch import nn
 
 from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.models import ActorCritic, to_bounds
-from ppo_torchrl.normalization import obs_scale
+from ppo_torchrl.normalization import make_observation_normalizer
 
 
 class DeployedPolicy(nn.Module):
     """obs -> normalize -> clip -> policy net mean -> squash/clip into the action bounds."""
 
-    def __init__(self, ac: ActorCritic, obs_stats: Optional[dict], obs_clip: Optional[float], epsilon: float):
+    def __init__(self, ac: ActorCritic, normalizer: nn.Module):
         super().__init__()
         # a frozen copy: the deployed module needs no torch.no_grad() and leaves training weights alone
         self.policy_net = copy.deepcopy(ac.policy_net).cpu().requires_grad_(False)
-        obs_dim = ac.policy_net[0][0].in_features
-        mean = np.zeros(obs_dim) if obs_stats is None else np.asarray(obs_stats["mean"])
-        std = np.ones(obs_dim) if obs_stats is None else obs_scale(obs_stats["var"], epsilon)
-        # float64, as the eval env normalizes (ObservationNorm on the float64 observation, then DoubleToFloat):
-        # `evaluate` and this module then feed the network the same float32 values and act alike, bit for bit
-        self.register_buffer("obs_mean", torch.as_tensor(mean, dtype=torch.float64))
-        self.register_buffer("obs_std", torch.as_tensor(std, dtype=torch.float64))
-        clip = float(obs_clip) if obs_stats is not None and obs_clip is not None else float("inf")
-        self.register_buffer("obs_clip", torch.tensor(clip, dtype=torch.float64))
+        # the eval env's normalization, frozen (normalization.FrozenNormalization: float64, as the eval env
+        # normalizes the float64 observation before casting to float32): `evaluate` and this module feed the
+        # network the same float32 values and act alike, bit for bit
+        self.normalize = normalizer
         self.register_buffer("low", ac.action_low.float().cpu())
         self.register_buffer("high", ac.action_high.float().cpu())
         self.squash = ac.head == "tanh_normal"
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        x = ((obs.double() - self.obs_mean) / self.obs_std).clamp(-self.obs_clip, self.obs_clip).float()
-        return to_bounds(self.policy_net(x)[0], self.low, self.high, self.squash)
+        return to_bounds(self.policy_net(self.normalize(obs).float())[0], self.low, self.high, self.squash)
 
 
 def export_policy(cfg, ac: ActorCritic, obs_stats: Optional[dict], path: Path) -> Path:
@@ -54,8 +47,12 @@ def export_policy(cfg, ac: ActorCritic, obs_stats: Optional[dict], path: Path) -
         target = t.extra[0].get("_target_", "?")
         raise ConfigError(f"export: env.transforms.extra[0] ({target}) cannot be baked into policy.pt; "
                           "export supports the built-in normalization and clipping only")
-    module = DeployedPolicy(ac, obs_stats, t.obs_clip, t.norm_epsilon).eval()
-    example = torch.zeros(2, module.obs_mean.shape[0])
+    obs_dim = ac.policy_net[0][0].in_features
+    normalizer = make_observation_normalizer(t, obs_dim, obs_stats, frozen=True)
+    if obs_stats is None:
+        normalizer.enabled = False
+    module = DeployedPolicy(ac, normalizer.module()).eval()
+    example = torch.zeros(2, obs_dim)
     with torch.no_grad():
         scripted = torch.jit.trace(module, example)
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -1,36 +1,53 @@
-"""Running statistics for observation and reward normalization.
+"""Observation and reward normalization: the one owner of the statistics, for every path.
 
-Observations: the TorchRL pipeline normalizes with TorchRL's `VecNorm` (decay 1: the exact running
-mean and variance of every observation the env emits, reset observations included, with the std
-floored at `eps`); the fast collector computes the same numbers in numpy (`ObservationNormalizer`,
-no prior count). Both report `{"mean", "var", "count"}`, the one format checkpoints, evaluation,
-export and init_from read, and `obs_scale` is the one formula that turns it into a scale.
-
-Rewards: TorchRL has no return-based scaling, so `ReturnNormalization` below is a TorchRL
-`Transform` around `ReturnNormalizer`, which the fast collector calls directly: the same code on
-both paths (SB3 VecNormalize's rule, with its prior count).
+`ObservationNormalizer` and `RewardNormalizer` hold the numbers (numpy, float64) and the formulas;
+each has two faces over the same object:
+- the numpy face, `__call__`, which the fast collector calls once per env step;
+- the TorchRL face, `ObservationNormalization` / `RewardNormalization` (`Transform`s), which the card's
+  pipeline `TransformedEnv(GymWrapper(...))` runs, whose `get_extra_state` is how any TorchRL collector
+  (one process, `MultiSyncCollector`, `RayCollector`) hands the statistics over in its `state_dict()`.
+Observations: `standardize` is the formula, once, for numpy arrays and torch tensors alike; the
+statistics are the exact running mean and variance of every observation the envs emit (reset ones
+included), or ("fixed") moments fitted on random-action rollouts by `fit_fixed`, then frozen.
+`pool` merges what several workers added to one set, exactly. `ObservationNormalizer.module()` is the
+frozen normalization as a torch module, which `export` bakes into policy.pt.
+Rewards: return-based scaling (SB3 VecNormalize's rule, with its prior count) or a fixed scale, then
+clipping. TorchRL has no return-based scaling, hence the transform here.
 """
 
 from __future__ import annotations
 
 import math
-from typing import Dict, Optional
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 import torch
 from tensordict import TensorDictBase
-from torchrl.envs.transforms import Transform
+from torch import nn
+from torchrl.data import Unbounded
+from torchrl.envs.transforms import ObservationTransform, Transform
+
+REWARD_MODES = ("return", "scale", "none")
 
 
 def obs_scale(var, epsilon: float):
-    """The std a normalizer divides by: sqrt(var) floored at epsilon, as VecNorm does."""
+    """The std a normalizer divides by: sqrt(var) floored at epsilon."""
     return np.maximum(np.sqrt(np.asarray(var, np.float64)), epsilon)
 
 
-def clip(x: np.ndarray, bound: Optional[float]) -> np.ndarray:
+def clip(x, bound: Optional[float]):
     """Clip to [-bound, bound]; None leaves x as it is. (np.clip's values; its Python wrapper costs
     a few microseconds more per call, and this runs several times per env step.)"""
-    return x if bound is None else np.minimum(np.maximum(x, -bound), bound)
+    if bound is None:
+        return x
+    if isinstance(x, torch.Tensor):
+        return x.clamp(-bound, bound)
+    return np.minimum(np.maximum(x, -bound), bound)
+
+
+def standardize(x, mean, scale, bound: Optional[float]):
+    """THE observation formula, for numpy arrays and torch tensors: (x - mean) / scale, clipped."""
+    return clip((x - mean) / scale, bound)
 
 
 class RunningMeanStd:
@@ -87,12 +104,31 @@ class RunningMeanStd:
             raise ValueError(f"normalization stats have shape {mean.shape}, expected {self.mean.shape}")
         self.mean = mean.copy()
         self.var = np.asarray(state["var"], np.float64).copy()
-        self.count = float(state["count"])
+        self.count = float(state.get("count", 0.0))
+
+
+def pool(base: Optional[dict], parts: Sequence[dict]) -> dict:
+    """Statistics {"mean", "var", "count"}: each part is `base` plus what one worker added since; the
+    result is `base` plus all of it, the exact moments of every value any worker saw (count-weighted
+    first and second moments, whatever the workers' timing). base None: the parts share nothing."""
+    def moments(s):
+        count, mean = float(s["count"]), np.asarray(s["mean"], np.float64)
+        return count, mean, np.asarray(s["var"], np.float64) + mean**2
+
+    c0, m0, s0 = moments(base) if base is not None else (0.0, 0.0, 0.0)
+    parts = [moments(p) for p in parts]
+    count = c0 + sum(c - c0 for c, _, _ in parts)
+    if count <= 0:
+        return dict(base) if base is not None else dict(parts and parts[0] or {})
+    mean = (c0 * m0 + sum(c * m - c0 * m0 for c, m, _ in parts)) / count
+    square = (c0 * s0 + sum(c * s - c0 * s0 for c, _, s in parts)) / count
+    return {"mean": np.asarray(mean, np.float64), "var": np.maximum(square - mean**2, 0.0), "count": count}
 
 
 class ObservationNormalizer:
-    """(obs - mean) / max(std, eps), clipped, as TorchRL's VecNorm(decay=1) and ClipTransform do;
-    stats update on every observation unless frozen."""
+    """`standardize(obs, mean, max(std, eps), clip)` with running statistics that update on every
+    observation unless frozen. The numpy face: `__call__`; the torch faces: `module()` and the
+    `ObservationNormalization` transform."""
 
     def __init__(self, shape: tuple, clip: Optional[float], epsilon: float = 1e-8, enabled: bool = True):
         self.stats = RunningMeanStd(shape, prior_count=0.0)
@@ -100,13 +136,130 @@ class ObservationNormalizer:
         self.epsilon = epsilon
         self.enabled = enabled
 
+    @property
+    def frozen(self) -> bool:
+        return self.stats.frozen
+
+    def freeze(self, frozen: bool = True) -> None:
+        self.stats.frozen = frozen
+
     def __call__(self, obs: np.ndarray, update: bool = True) -> np.ndarray:
         if not self.enabled:
             return obs.astype(np.float32)
         if update:
             self.stats.update(obs)
-        out = (obs - self.stats.mean) / obs_scale(self.stats.var, self.epsilon)
-        return clip(out, self.clip).astype(np.float32)
+        return self.apply(obs).astype(np.float32)
+
+    def apply(self, obs):
+        """The normalized observation in the input's dtype (float64 for the envs' observations)."""
+        if not self.enabled:
+            return obs
+        return standardize(obs, self.stats.mean, obs_scale(self.stats.var, self.epsilon), self.clip)
+
+    def fit_fixed(self, gym_env, frames: int, seed: int) -> None:
+        """obs_norm=fixed: the moments of `frames` observations of random-action rollouts, then frozen."""
+        obs = [gym_env.reset(seed=seed)[0]]
+        gym_env.action_space.seed(seed)
+        for _ in range(frames - 1):
+            o, _, term, trunc, _ = gym_env.step(gym_env.action_space.sample())
+            obs.append(gym_env.reset()[0] if term or trunc else o)
+        self.stats.update(np.stack(obs))
+        self.freeze()
+
+    def state_dict(self) -> Optional[dict]:
+        """{"mean", "var", "count"}: the one format checkpoints, evaluation, export and init_from read."""
+        return {**self.stats.state_dict(), "frozen": self.frozen} if self.enabled else None
+
+    def load_state_dict(self, state: Optional[dict]) -> None:
+        if state is None or not self.enabled:
+            return
+        self.stats.load_state_dict(state)
+        self.freeze(bool(state.get("frozen", self.frozen)))
+
+    def module(self) -> nn.Module:
+        """The frozen normalization as a torch module (float64 in, float64 out), for export."""
+        return FrozenNormalization(self)
+
+
+class FrozenNormalization(nn.Module):
+    def __init__(self, normalizer: ObservationNormalizer):
+        super().__init__()
+        mean, scale = normalizer.stats.mean, obs_scale(normalizer.stats.var, normalizer.epsilon)
+        if not normalizer.enabled:
+            mean, scale = np.zeros_like(mean), np.ones_like(mean)
+        self.register_buffer("mean", torch.as_tensor(mean, dtype=torch.float64))
+        self.register_buffer("scale", torch.as_tensor(scale, dtype=torch.float64))
+        self.bound = normalizer.clip if normalizer.enabled else None
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        return standardize(obs.double(), self.mean, self.scale, self.bound)
+
+
+def make_observation_normalizer(transforms_cfg, obs_dim: int, stats: Optional[dict] = None,
+                                frozen: bool = False) -> ObservationNormalizer:
+    """From `env.transforms`; with `stats` (a checkpoint's), loaded, and frozen if asked."""
+    t = transforms_cfg
+    norm = ObservationNormalizer((obs_dim,), t.obs_clip, t.norm_epsilon, enabled=t.obs_norm != "none")
+    if stats is not None:
+        norm.load_state_dict(stats)
+    if frozen:
+        norm.freeze()
+    return norm
+
+
+def as_arrays(state: dict) -> dict:
+    """Numbers as float64 arrays: TorchRL's worker processes carry state dicts as TensorDicts, where a Python
+    float would become a float32 tensor (a count of 1e6 + 1e-4 loses its prior)."""
+    return {k: np.asarray(v, np.float64) if isinstance(v, float) else v for k, v in state.items()}
+
+
+class ObservationNormalization(ObservationTransform):
+    """The TorchRL face of an `ObservationNormalizer`: normalizes "observation" on reset and step (in float64,
+    then to float32, as the networks take it), and updates the statistics with each observation the envs emit
+    (with a partial reset of batched envs, only the new ones)."""
+
+    def __init__(self, normalizer: ObservationNormalizer):
+        super().__init__(in_keys=["observation"], out_keys=["observation"])
+        self.normalizer = normalizer
+
+    def _normalize(self, obs: torch.Tensor, mask: Optional[torch.Tensor] = None) -> torch.Tensor:
+        norm = self.normalizer
+        x = obs.numpy() if obs.dtype == torch.float64 and obs.device.type == "cpu" else obs.detach().cpu().double().numpy()
+        if norm.enabled and not norm.frozen:
+            rows = x.reshape(-1, x.shape[-1])
+            if mask is not None:
+                rows = rows[mask.reshape(-1).cpu().numpy()]
+            if rows.shape[0]:
+                norm.stats.update(rows)
+        out = torch.from_numpy(np.asarray(norm.apply(x), np.float32))
+        return out if obs.device.type == "cpu" else out.to(obs.device)
+
+    def transform_observation_spec(self, observation_spec):
+        spec = observation_spec["observation"]
+        observation_spec["observation"] = Unbounded(shape=spec.shape, dtype=torch.float32, device=spec.device)
+        return observation_spec
+
+    def _apply_transform(self, obs: torch.Tensor) -> torch.Tensor:
+        """Outside an env (a module call, a replay buffer): normalize, leaving the statistics as they are."""
+        x = obs.detach().cpu().double().numpy()
+        return torch.as_tensor(self.normalizer.apply(x), dtype=torch.float32, device=obs.device)
+
+    def _call(self, next_tensordict: TensorDictBase) -> TensorDictBase:
+        return next_tensordict.set("observation", self._normalize(next_tensordict.get("observation")))
+
+    def _reset(self, tensordict: TensorDictBase, tensordict_reset: TensorDictBase) -> TensorDictBase:
+        mask = tensordict.get("_reset", None) if tensordict is not None else None
+        obs = tensordict_reset.get("observation")
+        if mask is not None:
+            mask = mask.reshape(obs.shape[:-1])
+        return tensordict_reset.set("observation", self._normalize(obs, mask))
+
+    def get_extra_state(self) -> dict:
+        return as_arrays(self.normalizer.state_dict() or {})
+
+    def set_extra_state(self, state) -> None:
+        if state:
+            self.normalizer.load_state_dict(state)
 
 
 class ReturnNormalizer:
@@ -139,31 +292,56 @@ class ReturnNormalizer:
         return clip(reward / np.sqrt(self.stats.var + self.epsilon), self.clip)
 
 
-class ReturnNormalization(Transform):
-    """TorchRL transform: divide `reward` by the running std of the discounted return.
+class RewardNormalizer:
+    """env.transforms.reward_norm: "return" (ReturnNormalizer), "scale" (reward x reward_scale, clipped)
+    or "none" (raw). The numpy face `__call__(reward, done)` is what every path runs."""
 
-    TorchRL ships `VecNorm` (reward std) and `RewardScaling` (fixed), not the return-based scaling
-    that PPO's MuJoCo results rely on, so this wraps `ReturnNormalizer` as a transform.
-    """
+    def __init__(self, mode: str, num_envs: int, gamma: float, scale: float, clip: Optional[float],
+                 epsilon: float = 1e-8):
+        self.mode = mode
+        self.scale_factor = scale
+        self.clip = clip
+        self.returns = ReturnNormalizer(num_envs, gamma, clip, epsilon)
 
-    def __init__(self, gamma: float, clip: Optional[float], num_envs: int = 1, epsilon: float = 1e-8):
-        super().__init__(in_keys=["reward"], out_keys=["reward"])
-        self.normalizer = ReturnNormalizer(num_envs, gamma, clip, epsilon)
+    def __call__(self, reward: np.ndarray, done: np.ndarray):
+        if self.mode == "return":
+            return self.returns(reward, done)
+        if self.mode == "scale":
+            return clip(reward * self.scale_factor, self.clip)
+        return reward
 
-    def get_extra_state(self) -> Dict[str, torch.Tensor]:
-        """In the module's state_dict (and so in a TorchRL collector's): the return statistics and
-        each env's discounted return so far, which is how worker processes hand them over to merge."""
-        stats = self.normalizer.stats
-        return {"mean": torch.tensor(stats.mean), "var": torch.tensor(stats.var),
-                "count": torch.tensor(stats.count, dtype=torch.float64),
-                "returns": torch.from_numpy(self.normalizer.returns.copy())}
+    def state_dict(self) -> dict:
+        return {**self.returns.stats.state_dict(), "returns": self.returns.returns.copy()}
 
-    def set_extra_state(self, state) -> None:
+    def load_state_dict(self, state: Optional[dict], running: bool = True) -> None:
+        """The return statistics; each env's discounted return so far too when `running` and given."""
         if not state:
             return
-        self.normalizer.stats.load_state_dict({k: np.asarray(state[k]) for k in ("mean", "var", "count")})
-        if "returns" in state:
-            self.normalizer.returns = np.asarray(state["returns"], np.float64).copy()
+        self.returns.stats.load_state_dict(state)
+        returns = None if state.get("returns") is None else np.asarray(state["returns"], np.float64)
+        if running and returns is not None and returns.size == self.returns.returns.size:
+            self.returns.returns = returns.reshape(self.returns.returns.shape).copy()
+
+
+def make_reward_normalizer(transforms_cfg, num_envs: int, gamma: float) -> RewardNormalizer:
+    t = transforms_cfg
+    return RewardNormalizer(t.reward_norm, num_envs, gamma, t.reward_scale, t.reward_clip, t.norm_epsilon)
+
+
+class RewardNormalization(Transform):
+    """The TorchRL face of a `RewardNormalizer`: rewrites "reward" on each step."""
+
+    def __init__(self, normalizer: RewardNormalizer):
+        super().__init__(in_keys=["reward"], out_keys=["reward"])
+        self.normalizer = normalizer
+
+    def get_extra_state(self) -> dict:
+        """In the module's state_dict (and so in any TorchRL collector's): the return statistics and each
+        env's discounted return so far."""
+        return as_arrays(self.normalizer.state_dict())
+
+    def set_extra_state(self, state) -> None:
+        self.normalizer.load_state_dict(state)
 
     def _step(self, tensordict: TensorDictBase, next_tensordict: TensorDictBase) -> TensorDictBase:
         reward = next_tensordict.get("reward")
@@ -171,3 +349,18 @@ class ReturnNormalization(Transform):
         scaled = self.normalizer(reward.reshape(-1).double().cpu().numpy(), done)
         next_tensordict.set("reward", torch.as_tensor(scaled, dtype=reward.dtype).reshape(reward.shape))
         return next_tensordict
+
+
+def stats_of(transforms: Sequence[Transform]) -> Tuple[Optional[ObservationNormalizer], Optional[RewardNormalizer]]:
+    """The normalizers a TorchRL env's transforms hold (None where there is none)."""
+    obs = next((t.normalizer for t in transforms if isinstance(t, ObservationNormalization)), None)
+    rew = next((t.normalizer for t in transforms if isinstance(t, RewardNormalization)), None)
+    return obs, rew
+
+
+def pooled(base: Optional[dict], parts: List[Optional[dict]]) -> Optional[dict]:
+    """`pool` of state dicts that may be None (no normalization) or frozen (nothing to merge)."""
+    if not parts or parts[0] is None or parts[0].get("frozen"):
+        return parts[0] if parts else None
+    extra = {k: v for k, v in parts[0].items() if k not in ("mean", "var", "count")}
+    return {**extra, **pool(base, parts)}

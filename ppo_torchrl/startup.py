@@ -11,6 +11,7 @@ from pathlib import Path
 
 from omegaconf import OmegaConf
 
+from ppo_torchrl.collectors.choice import describe_backend
 from ppo_torchrl.config import Config
 from ppo_torchrl.envs import MJCF_ID, env_label
 from ppo_torchrl.loggers import job_tag
@@ -48,12 +49,15 @@ def command_line() -> list[str]:
 
 def describe_start(cfg, cli_overrides: list[str]) -> str:
     """`start: Hopper-v4, 489 batches x 2048 = 1,001,472 frames (collector.total_frames=1000000 rounded
-    up); set by the env file/preset: policy.width=128, ...`: keys given on the command line are left out."""
+    up); collector: FastCollector (no env.transforms.extra); set by the env file/preset: policy.width=128, ...`:
+    keys given on the command line are left out."""
     batches, frames = frame_budget(cfg)
     line = (f"start: {env_label(cfg.env)}, {batches} batch{'es' if batches != 1 else ''} x "
             f"{cfg.collector.frames_per_batch} = {frames:,} frames")
     if frames != cfg.collector.total_frames:
         line += f" (collector.total_frames={cfg.collector.total_frames} rounded up)"
+    collector, why = describe_backend(cfg)
+    line += f"; collector: {collector} ({why})"
     defaults = flatten(OmegaConf.to_container(OmegaConf.structured(Config)))
     users = user_values(cli_overrides)
     unread = tuple(not_applicable(cfg))

@@ -148,7 +148,7 @@ class Trainer:
         if with_optimizer:
             self.optimizer.load_state_dict(state["optimizer"])
         norm = state["normalization"]
-        self.collector.load_state_dict({k: norm.get(k) for k in ("obs", "return", "vecnorm")})
+        self.collector.load_state_dict({k: norm.get(k) for k in ("obs", "return")})
         source_env = state.get("config", {}).get("env", {})
         print(f"init_from: weights{', optimizer' if with_optimizer else ''} and normalization stats of {path} "
               f"({state['frames']} frames on {env_label(source_env)})", file=sys.stderr)

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from ppo_torchrl import evaluate
-from ppo_torchrl.envs import get_env_state, gym_make_kwargs, make_gym_env, set_env_state
+from ppo_torchrl.envs import gym_make_kwargs, make_gym_env
+from ppo_torchrl.positions import get_env_state, set_env_state
 from ppo_torchrl.trainer import Trainer
 
 from conftest import TINY, compose_config

@@ -22,7 +22,7 @@ def draw(ac, obs: torch.Tensor, seed: int = 0):
     """NumpyPolicy's draw with the noise torch's own rsample would use under the same seed."""
     torch.manual_seed(seed)
     noise = torch.randn(obs.shape[0], SPEC.action_dim).numpy()
-    return NumpyPolicy(ac).act(obs.numpy(), noise)
+    return NumpyPolicy.from_actor(ac.actor).act(obs.numpy(), noise)
 
 
 @pytest.mark.parametrize("overrides", [["policy=tanh_normal"], ["policy=tanh_normal", "policy.std=state_dependent",
@@ -42,7 +42,7 @@ def test_numpy_policy_draws_what_torchrl_tanh_normal_draws(overrides):
 
 def test_numpy_policy_follows_the_weights_after_sync():
     ac = build("policy=tanh_normal", "policy.activation=relu", "policy.shared_trunk=true")
-    policy = NumpyPolicy(ac)
+    policy = NumpyPolicy.from_actor(ac.actor)
     obs = torch.randn(8, 5)
     with torch.no_grad():
         for p in ac.policy_net.parameters():
@@ -57,7 +57,7 @@ def test_numpy_policy_follows_the_weights_after_sync():
 
 def test_normal_stores_raw_sample_and_clips_what_the_env_gets():
     ac = build("policy=normal")
-    policy = NumpyPolicy(ac)
+    policy = NumpyPolicy.from_actor(ac.actor)
     policy.loc_scale = lambda obs: (np.array([[5.0, -5.0]], np.float32), np.full((1, 2), 1e-3, np.float32))
     stored, to_env = policy.act(np.zeros((1, 5), np.float32), np.zeros((1, 2), np.float32))
     assert stored[0, 0] > 4.9 and stored[0, 1] < -4.9

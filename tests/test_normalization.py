@@ -48,13 +48,14 @@ def test_one_env_return_scaling_is_the_array_arithmetic_bit_for_bit():
 
 
 def test_both_backends_normalizers_give_numpys_mean_and_var_of_the_same_stream():
-    """A real Hopper-v4 stream (random actions, resets included) through TorchRL's VecNorm, as the
-    torchrl backend runs it, and through the fast collector's normalizer: both equal numpy's."""
+    """A real Hopper-v4 stream (random actions, resets included) through the ObservationNormalization
+    transform, as TorchRL's Collector runs it, and through its numpy face, as the fast collector calls it:
+    both equal numpy's."""
     import torch
     from torchrl.envs import RenameTransform
 
-    from ppo_torchrl.envs import make_torchrl_env, observation_norm, torchrl_obs_stats
-    from ppo_torchrl.normalization import ObservationNormalizer, obs_scale
+    from ppo_torchrl.envs import make_torchrl_env
+    from ppo_torchrl.normalization import ObservationNormalizer, obs_scale, stats_of
 
     from conftest import compose_config
 
@@ -74,7 +75,8 @@ def test_both_backends_normalizers_give_numpys_mean_and_var_of_the_same_stream()
     stream = torch.stack(stream).double().numpy()
     assert done.sum() >= 20 and stream.shape[0] == 1 + 2000 + int(done[:-1].sum())
 
-    vecnorm = torchrl_obs_stats(observation_norm(env), count=len(stream))
+    vecnorm = stats_of(list(env.transform))[0].state_dict()
+    assert vecnorm["count"] == len(stream)
     fast = ObservationNormalizer((stream.shape[1],), clip=None)
     for row in stream:
         fast(row[None])

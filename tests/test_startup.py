@@ -33,7 +33,8 @@ def test_start_line_names_what_the_env_file_changes_but_not_the_command_line():
 
 def test_start_line_of_an_exact_budget_and_the_defaults():
     line = start_line("env=InvertedPendulum-v4", "collector.total_frames=4096")
-    assert line == "start: InvertedPendulum-v4, 2 batches x 2048 = 4,096 frames; the env file/preset changes no defaults"
+    assert line == ("start: InvertedPendulum-v4, 2 batches x 2048 = 4,096 frames; collector: FastCollector "
+                    "(no env.transforms.extra); the env file/preset changes no defaults")
 
 
 SAVED = {"config": {"env": {"id": "InvertedPendulum-v4"}}}  # what a checkpoint holds of its config

@@ -11,7 +11,7 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type
 from ppo_torchrl import evaluate, export
 from ppo_torchrl.checkpoint import load_policy
 from ppo_torchrl.collectors import resolve_backend
-from ppo_torchrl.envs import frozen_observation_norm
+from ppo_torchrl.normalization import make_observation_normalizer
 from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.trainer import Trainer
 
@@ -28,8 +28,8 @@ def test_a_torchrl_checkpoint_evaluates_to_its_final_eval_and_exports_the_actors
     path = export.export_policy(loaded_cfg, ac, state["normalization"]["obs"], tmp_path / "policy.pt")
     deployed = torch.jit.load(str(path))
     raw = torch.randn(16, 4, dtype=torch.float64) * 0.3
-    norm = frozen_observation_norm(state["normalization"]["obs"], loaded_cfg.env.transforms.norm_epsilon)
-    obs = norm._apply_transform(raw).clamp(-10, 10).float()
+    norm = make_observation_normalizer(loaded_cfg.env.transforms, 4, state["normalization"]["obs"], frozen=True)
+    obs = torch.as_tensor(norm.apply(raw.numpy())).float()
     with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
         td = ac.actor(__import__("tensordict").TensorDict({"observation": obs}, batch_size=[16]))
     expected = torch.maximum(torch.minimum(td["action"], ac.action_high), ac.action_low)

@@ -7,7 +7,8 @@ import multiprocessing
 import pytest
 import torch
 
-from ppo_torchrl.collectors import FastCollector
+from ppo_torchrl.collectors.collection import Collection
+from ppo_torchrl.collectors.fast import FastCollector
 from ppo_torchrl.losses import LOSS_INPUT_KEYS
 from ppo_torchrl.minibatch import EagerStep, FusedStep
 from ppo_torchrl.trainer import Trainer, use_compile
@@ -59,7 +60,8 @@ def test_transform_options(tiny_cfg, tmp_path, obs_norm, reward_norm):
 def test_fast_collector_batch_layout_and_truncation(tiny_cfg):
     cfg = tiny_cfg("collector.num_envs=2", "env.max_episode_steps=50")
     trainer = Trainer(cfg, "/tmp/unused")
-    collector: FastCollector = trainer.collector
+    collector: Collection = trainer.collector
+    assert isinstance(collector.collector, FastCollector)  # a torchrl.collectors.Collector
     batch = collector.collect()
     assert batch.batch_size == torch.Size([2, 128])
     nxt = batch["next"]

@@ -16,8 +16,7 @@ import torch
 
 from conftest import ROOT, TINY, run_cli
 from ppo_torchrl import evaluate, export
-from ppo_torchrl.collectors import make_collector
-from ppo_torchrl.collectors.multiprocess import pool
+from ppo_torchrl.normalization import pool
 from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.trainer import Trainer
 from ppo_torchrl.collectors.multiprocess import warn_if_oversubscribed
@@ -44,14 +43,14 @@ def test_pooling_is_the_exact_mean_and_variance_of_everything_the_workers_saw():
     rng = np.random.default_rng(0)
     seen, worker_a, worker_b = rng.normal(3, 2, (50, 4)), rng.normal(-1, 1, (30, 4)), rng.normal(5, 3, (70, 4))
 
-    def moments(x):
-        return torch.tensor(float(len(x)), dtype=torch.float64), torch.tensor(x.mean(0)), torch.tensor((x**2).mean(0))
+    def stats(x):
+        return {"mean": x.mean(0), "var": x.var(0), "count": float(len(x))}
 
-    count, mean, square = pool(moments(seen), [moments(np.concatenate([seen, w])) for w in (worker_a, worker_b)])
+    merged = pool(stats(seen), [stats(np.concatenate([seen, w])) for w in (worker_a, worker_b)])
     everything = np.concatenate([seen, worker_a, worker_b])
-    assert count.item() == 150
-    np.testing.assert_allclose(mean.numpy(), everything.mean(0), rtol=1e-12)
-    np.testing.assert_allclose((square - mean**2).numpy(), everything.var(0), rtol=1e-10)
+    assert merged["count"] == 150
+    np.testing.assert_allclose(merged["mean"], everything.mean(0), rtol=1e-12)
+    np.testing.assert_allclose(merged["var"], everything.var(0), rtol=1e-10)
 
 
 HAS_RAY = importlib.util.find_spec("ray") is not None
@@ -59,18 +58,22 @@ RAY = pytest.param("collector.distributed=ray", marks=pytest.mark.skipif(not HAS
 
 
 @pytest.mark.parametrize("distributed", ["collector.distributed=null", RAY])
-def test_workers_collect_exact_on_policy_batches_and_share_one_set_of_stats(tiny_cfg, tmp_path, distributed):
-    cfg = tiny_cfg(*WORKERS, distributed)
+@pytest.mark.parametrize("backend", ["fast", "torchrl"])
+def test_workers_collect_exact_on_policy_batches_and_share_one_set_of_stats(tiny_cfg, tmp_path, distributed, backend):
+    """TorchRL's MultiSyncCollector / RayCollector building FastCollector (or TorchRL's Collector) in each worker."""
+    cfg = tiny_cfg(*WORKERS, distributed, f"collector.backend={backend}")
     trainer = Trainer(cfg, tmp_path)
     collector = trainer.collector
     try:
-        assert type(collector).__name__ == "MultiProcessCollector"
+        assert type(collector.collector).__name__ == ("RayCollector" if "ray" in distributed else "MultiSyncCollector")
         batches = [collector.collect() for _ in range(2)]
         assert [tuple(b.shape) for b in batches] == [(4, 64), (4, 64)]  # exactly frames_per_batch each
         dones = sum(int(b.get(("next", "done")).sum()) for b in batches)
         obs = collector.obs_stats()
         # every observation counted once: each env's first reset, every step and every reset after a done
-        assert obs["count"] == 4 + 512 + dones and np.isfinite(obs["mean"]).all() and (obs["var"] > 0).all()
+        # (TorchRL's Collector resets each env when built and again when its worker starts: one more each)
+        first = 4 if backend == "fast" else 8
+        assert obs["count"] == first + 512 + dones and np.isfinite(obs["mean"]).all() and (obs["var"] > 0).all()
         returns = collector.state_dict()["return"]
         assert returns["count"] == pytest.approx(512 + 1e-4)  # the prior, then each frame's return once
 
@@ -80,11 +83,16 @@ def test_workers_collect_exact_on_policy_batches_and_share_one_set_of_stats(tiny
         collector.collect()
         mine = collector.env.transform.state_dict()  # the merged set, in the main process
         _, workers = collector._worker_states()
+        # FastCollector's state_dict() adds where each env is; TorchRL's Collector's has no such entry
+        assert all(("positions" in w) == (backend == "fast") for w in workers)
         assert len(workers) == 2
         for worker in workers:
-            for key, value in trainer.ac.actor.state_dict().items():
+            # the worker's policy: the actor (FastCollector) or the lean draw over the actor's net (TorchRL's)
+            weights = (trainer.ac.actor.state_dict() if backend == "fast" else
+                       {f"module.policy_net.{k}": v for k, v in trainer.ac.policy_net.state_dict().items()})
+            for key, value in weights.items():
                 torch.testing.assert_close(worker["policy_state_dict"][key], value, rtol=0, atol=0)
-            for key in collector._stat_keys():  # VecNorm's and the return normalizer's statistics
+            for key in collector._stat_keys().values():  # the observation and return statistics
                 theirs, ours = worker["env_state_dict"][key], mine[key]
                 for name in set(ours) - {"returns"}:
                     torch.testing.assert_close(torch.as_tensor(theirs[name]), torch.as_tensor(ours[name]))
@@ -105,7 +113,7 @@ def test_a_workers_run_checkpoints_evaluates_exports_and_resumes(tiny_cfg, tmp_p
     from ppo_torchrl.config import resume_config
 
     state = load(tmp_path / "checkpoints" / "last.pt")
-    assert state["normalization"]["vecnorm"] is not None and state["normalization"]["return"] is not None
+    assert state["normalization"]["collector"] is not None and state["normalization"]["return"] is not None
     resumed = Trainer(resume_config(tmp_path, ["collector.total_frames=768"], state), tmp_path, resume=state)
     assert resumed.collector.obs_stats()["count"] == state["normalization"]["obs"]["count"]
     assert resumed.train()["frames"] == 768
@@ -115,7 +123,6 @@ def test_a_workers_run_checkpoints_evaluates_exports_and_resumes(tiny_cfg, tmp_p
     (["collector.workers=0"], "collector.workers=0 must be >= 1"),
     (["collector.distributed=slurm"], "collector.distributed='slurm' is not known; use null (local processes) or ray"),
     (["collector.workers=3"], "collector.frames_per_batch=256 must be divisible by collector.workers x collector.num_envs=3 x 1"),
-    (["collector.workers=2", "collector.backend=fast"], "use collector.backend=auto (or torchrl), not fast"),
     (["collector.ray_address=auto"], "collector.ray_address=auto needs collector.distributed=ray"),
 ])
 def test_bad_worker_settings_are_one_line_errors(tiny_cfg, overrides, expected):

@@ -1,114 +1,133 @@
-"""The fast backend: the TorchRL pipeline's math in a lean numpy loop over the same Gymnasium envs.
+"""The fast collector: a `torchrl.collectors.Collector` whose rollout steps lean.
 
-A numpy copy of the policy net (`NumpyPolicy`) draws each action, observations and rewards are
-normalized in numpy with the same statistics VecNorm and `ReturnNormalization` compute, and there
-is no per-step TensorDict or torch op: the per-step cost is close to the simulator's own. The batch
-it returns has TorchRL's layout and keys.
+It is TorchRL's Collector over the same `TransformedEnv(GymWrapper(...))` as every path, built with the
+arguments TorchRL's `MultiSyncCollector`, `MultiAsyncCollector` and `RayCollector` pass to a
+`collector_class` (so they run it in each worker), weights arriving through TorchRL's weight sync. Only
+`rollout()` differs: a numpy copy of the actor's net (`NumpyPolicy`) draws each action, and the env's
+Gymnasium envs (positions.GymEnvs) are stepped directly, the observation and reward going through the
+numpy face of the env's own normalization transforms; no per-step TensorDict or torch op, so the
+per-step cost is close to the simulator's own. The batch has TorchRL's layout and keys, RewardSum's and
+StepCounter's included (from Gymnasium's RecordEpisodeStatistics), [num_envs, steps].
 """
 
 from __future__ import annotations
 
-from typing import Dict, List, Optional, Tuple
+import pickle
+from typing import Optional
 
 import numpy as np
 import torch
 from tensordict import TensorDict
+from torchrl.collectors import Collector
+from torchrl.envs import EnvBase, TransformedEnv
 
-from ppo_torchrl.envs import get_env_state, make_gym_env, set_env_state
-from ppo_torchrl.models import ActorCritic, NumpyPolicy
-from ppo_torchrl.normalization import ObservationNormalizer, ReturnNormalizer, clip
+from ppo_torchrl.models import NumpyPolicy
+from ppo_torchrl.normalization import stats_of
+from ppo_torchrl.positions import GymEnvs
 
 
-class FastCollector:
-    def __init__(self, cfg, ac: ActorCritic, seed: int, device: torch.device):
-        t = cfg.env.transforms
-        self.ac, self.device = ac, device
-        self.policy = NumpyPolicy(ac)
-        self.rng = np.random.default_rng(seed)  # the policy's exploration noise
-        self.num_envs = cfg.collector.num_envs
-        self.steps = cfg.collector.frames_per_batch // self.num_envs
-        self.envs = [make_gym_env(cfg.env) for _ in range(self.num_envs)]
-        obs_dim = self.envs[0].observation_space.shape[0]
-        self.obs_norm = ObservationNormalizer((obs_dim,), t.obs_clip, t.norm_epsilon, enabled=t.obs_norm != "none")
-        self.reward_mode = t.reward_norm
-        self.reward_scale = t.reward_scale
-        self.reward_clip = t.reward_clip
-        self.return_norm = ReturnNormalizer(self.num_envs, cfg.advantage.gamma, t.reward_clip, t.norm_epsilon)
-        for i, env in enumerate(self.envs):
-            env.action_space.seed(seed + i)
-        if t.obs_norm == "fixed":
-            self._fit_fixed_obs_stats(t.obs_norm_init_frames, seed)
-        raw = np.stack([env.reset(seed=seed + i)[0] for i, env in enumerate(self.envs)])
-        self._first_raw_obs = raw  # re-normalized if stats are loaded before the first batch
-        self._obs = self.obs_norm(raw)
-        self._episode_return = np.zeros(self.num_envs)
-        self._episode_length = np.zeros(self.num_envs, np.int64)
-        self._finished: List[Tuple[float, int]] = []
+def pack(obj) -> torch.Tensor:
+    """A Python object as a uint8 tensor: TorchRL's worker processes pass state dicts through TensorDict,
+    which only carries tensors (an RNG state holds 128-bit integers)."""
+    return torch.frombuffer(bytearray(pickle.dumps(obj)), dtype=torch.uint8)
 
-    def _fit_fixed_obs_stats(self, frames: int, seed: int) -> None:
-        """ObservationNorm-style stats from random-action rollouts, then frozen."""
-        env = self.envs[0]
-        obs = [env.reset(seed=seed)[0]]
-        for _ in range(frames - 1):
-            o, _, term, trunc, _ = env.step(env.action_space.sample())
-            obs.append(env.reset()[0] if term or trunc else o)
-        self.obs_norm.stats.update(np.stack(obs))
-        self.obs_norm.stats.frozen = True
 
-    def _scale_rewards(self, reward: np.ndarray, done: np.ndarray) -> np.ndarray:
-        if self.reward_mode == "return":
-            return self.return_norm(reward, done)
-        if self.reward_mode == "scale":
-            return clip(reward * self.reward_scale, self.reward_clip)
-        return reward
+def unpack(blob) -> object:
+    return pickle.loads(blob.numpy().tobytes() if isinstance(blob, torch.Tensor) else bytes(blob))
+
+
+class FastCollector(Collector):
+    def __init__(self, create_env_fn, policy=None, *, frames_per_batch: int, **kwargs):
+        kwargs["use_buffers"] = False  # each rollout is a new TensorDict
+        kwargs.setdefault("auto_register_policy_transforms", False)
+        env = create_env_fn if isinstance(create_env_fn, EnvBase) else create_env_fn(**(kwargs.pop("create_env_kwargs", None) or {}))
+        transforms = list(env.transform) if isinstance(env, TransformedEnv) else []
+        self.gym = next((t for t in transforms if isinstance(t, GymEnvs)), None)
+        if self.gym is None:
+            raise TypeError("FastCollector steps the env of envs.make_torchrl_env (a GymEnvs transform)")
+        self.obs_norm, self.reward_norm = stats_of(transforms)
+        before = self.obs_norm.state_dict()
+        super().__init__(env, policy, frames_per_batch=frames_per_batch, **kwargs)
+        # TorchRL's Collector resets the env once (its carrier), which this rollout does not use: the
+        # statistics count each env's first observation when the first rollout acts on it.
+        self.obs_norm.load_state_dict(before)
+        self.num_envs = len(self.gym.gym_envs)
+        self.steps = frames_per_batch // self.num_envs
+        self.numpy_policy = NumpyPolicy.from_actor(self.policy)
+        self.rng = np.random.default_rng(0)  # the policy's exploration noise (set_seed reseeds it)
+        self._obs: Optional[np.ndarray] = None  # the normalized observation each env's policy acts on next
+        self._counted = False  # whether the statistics have seen the envs' current observations
+        self._traj_ids = np.arange(self.num_envs)  # ("collector", "traj_ids"): a new id for each new episode
+
+    def set_seed(self, seed: int, static_seed: bool = False) -> int:
+        out = super().set_seed(seed, static_seed)
+        self.rng = np.random.default_rng(seed)
+        self._obs, self._counted = None, False  # the envs were reset by the wrapper, under the transforms
+        return out
+
+    def reset(self, index=None, **kwargs) -> None:
+        """TorchRL's reset (through the transforms, which count the new observations): the next rollout
+        starts from it."""
+        super().reset(index, **kwargs)
+        self._obs, self._counted = None, True
+
+    def _current_obs(self) -> np.ndarray:
+        if self._obs is None:
+            self._obs = self.obs_norm(np.stack([env.last_obs for env in self.gym.gym_envs]), update=not self._counted)
+        return self._obs
 
     @torch.no_grad()
-    def collect(self) -> TensorDict:
+    def rollout(self) -> TensorDict:
         n, steps = self.num_envs, self.steps
-        obs_dim = self._obs.shape[1]
-        act_dim = self.ac.action_low.shape[0]
+        obs = self._current_obs()
+        obs_dim = obs.shape[1]
+        policy = self.numpy_policy
+        policy.sync()
+        act_dim = policy.low.shape[0]
         obs_buf = np.empty((steps, n, obs_dim), np.float32)
         next_buf = np.empty((steps, n, obs_dim), np.float32)
         act_buf = np.empty((steps, n, act_dim), np.float32)
-        self.policy.sync()
         noise = self.rng.standard_normal((steps, n, act_dim), dtype=np.float32)
         rew_buf = np.empty((steps, n), np.float32)
+        ep_return = np.empty((steps, n), np.float32)
+        ep_length = np.empty((steps, n), np.int64)
+        traj_buf = np.empty((steps, n), np.int64)
         term_buf = np.zeros((steps, n), bool)
         trunc_buf = np.zeros((steps, n), bool)
         raw_next = np.empty((n, obs_dim))
         reward = np.empty(n)
-        act, envs = self.policy.act, self.envs
-        obs = self._obs
+        envs = self.gym.gym_envs
+        records = [env.record for env in envs]
+        act, normalize, scale_rewards = policy.act, self.obs_norm, self.reward_norm
         for t in range(steps):
             obs_buf[t] = obs
+            traj_buf[t] = self._traj_ids
             act_buf[t], to_env = act(obs, noise[t])
             reset_rows = []
             for i, env in enumerate(envs):
-                o, r, term, trunc, _ = env.step(to_env[i])
+                o, r, term, trunc, info = env.step(to_env[i])
                 raw_next[i], reward[i] = o, r
-                term_buf[t, i], trunc_buf[t, i] = term, trunc
                 if term or trunc:
-                    reset_rows.append((i, env.reset()[0]))
-            self._episode_return += reward
-            self._episode_length += 1
-            # The stats see every observation the env emits, as VecNorm does on the TorchRL path: each
-            # step's next observation (a final one too), then the reset observation where an episode ended.
-            next_obs = self.obs_norm(raw_next)
+                    term_buf[t, i], trunc_buf[t, i] = term, trunc
+                    ep_return[t, i], ep_length[t, i] = info["episode"]["r"], info["episode"]["l"]
+                    reset_rows.append(i)
+                else:
+                    ep_return[t, i], ep_length[t, i] = records[i].episode_returns, records[i].episode_lengths
+            # The stats see every observation the env emits, as on TorchRL's path: each step's next
+            # observation (a final one too), then the reset observation where an episode ended.
+            next_obs = normalize(raw_next)
             obs = next_obs
             if reset_rows:
                 obs = next_obs.copy()
-                for i, first in reset_rows:
-                    obs[i] = self.obs_norm(first[None])[0]
-                    self._finished.append((float(self._episode_return[i]), int(self._episode_length[i])))
-                    self._episode_return[i] = 0.0
-                    self._episode_length[i] = 0
+                for i in reset_rows:
+                    obs[i] = normalize(envs[i].reset()[0][None])[0]
+                    self._traj_ids[i] = self._traj_ids.max() + 1
             next_buf[t] = next_obs
-            rew_buf[t] = self._scale_rewards(reward, term_buf[t] | trunc_buf[t])
+            rew_buf[t] = scale_rewards(reward, term_buf[t] | trunc_buf[t])
         self._obs = obs
-        self._first_raw_obs = None
 
         def tensor(x: np.ndarray) -> torch.Tensor:  # [steps, n, ...] -> [n, steps, ...]
-            return torch.from_numpy(np.ascontiguousarray(np.swapaxes(x, 0, 1))).to(self.device)
+            return torch.from_numpy(np.ascontiguousarray(np.swapaxes(x, 0, 1))).to(self.storing_device)
 
         terminated = tensor(term_buf).unsqueeze(-1)
         truncated = tensor(trunc_buf).unsqueeze(-1)
@@ -116,64 +135,39 @@ class FastCollector:
             {
                 "observation": tensor(obs_buf),
                 "action": tensor(act_buf),
+                "collector": {"traj_ids": tensor(traj_buf)},
                 "next": {
                     "observation": tensor(next_buf),
                     "reward": tensor(rew_buf).unsqueeze(-1),
                     "terminated": terminated,
                     "truncated": truncated,
                     "done": terminated | truncated,
+                    "episode_reward": tensor(ep_return).unsqueeze(-1),
+                    "step_count": tensor(ep_length).unsqueeze(-1),
                 },
             },
             batch_size=[n, steps],
-            device=self.device,
+            device=self.storing_device,
         )
 
-    def pop_episodes(self) -> List[Tuple[float, int]]:
-        finished, self._finished = self._finished, []
-        return finished
+    def state_dict(self):
+        """TorchRL's (the env's transforms hold the statistics), and where each env is ("positions": the
+        simulator, the episode so far, the observation acted on next, and the exploration RNG) so a
+        resumed run continues bit-exactly; "env_metrics" for the main process of a multi-process run."""
+        state = super().state_dict()
+        state["positions"] = pack({"envs": self.gym.positions(), "obs": self._current_obs().copy(),
+                                   "rng": self.rng.bit_generator.state})
+        state["env_metrics"] = pack(self.gym.env_metrics())
+        return state
 
-    def env_metrics(self) -> Dict[str, float]:
-        reports = [env.unwrapped.terrain_metrics() for env in self.envs if hasattr(env.unwrapped, "terrain_metrics")]
-        reports = [r for r in reports if r]
-        return {key: float(np.mean([r[key] for r in reports])) for key in reports[0]} if reports else {}
-
-    def obs_stats(self) -> Optional[dict]:
-        return self.obs_norm.stats.state_dict() if self.obs_norm.enabled else None
-
-    def state_dict(self) -> dict:
-        """Normalization stats, plus where each env is, so a resumed run continues bit-exactly."""
-        return {
-            "obs": self.obs_stats(),
-            "obs_frozen": self.obs_norm.stats.frozen,
-            "return": self.return_norm.stats.state_dict(),
-            "running_returns": self.return_norm.returns.copy(),
-            "envs": [get_env_state(env) for env in self.envs],
-            "current_obs": self._obs.copy(),
-            "rng": self.rng.bit_generator.state,
-            "episode_return": self._episode_return.copy(),
-            "episode_length": self._episode_length.copy(),
-        }
-
-    def load_state_dict(self, state: dict) -> None:
-        """Stats always; env positions too when the checkpoint has them for as many envs."""
-        if state.get("obs") is not None and self.obs_norm.enabled:
-            self.obs_norm.stats.load_state_dict(state["obs"])
-            self.obs_norm.stats.frozen = bool(state.get("obs_frozen", False))
-        if state.get("return") is not None:
-            self.return_norm.stats.load_state_dict(state["return"])
-        envs = state.get("envs")
-        if envs is None and self._first_raw_obs is not None:  # stats only (init_from), nothing collected yet
-            self._obs = self.obs_norm(self._first_raw_obs, update=False)
-        if envs is not None and len(envs) == self.num_envs and state["current_obs"].shape == self._obs.shape:
-            for env, env_state in zip(self.envs, envs):
-                set_env_state(env, env_state)
-            self._obs = state["current_obs"].copy()
-            if "rng" in state:
-                self.rng.bit_generator.state = state["rng"]
-            self._episode_return = state["episode_return"].copy()
-            self._episode_length = state["episode_length"].copy()
-            self.return_norm.returns = state["running_returns"].copy()
-
-    def close(self) -> None:
-        for env in self.envs:
-            env.close()
+    def load_state_dict(self, state_dict, **kwargs) -> None:
+        state = dict(state_dict)
+        positions = state.pop("positions", None)
+        state.pop("env_metrics", None)
+        kwargs.setdefault("strict", False)
+        super().load_state_dict({"frames": self._frames, "iter": self._iter, **state}, **kwargs)
+        if positions is not None:
+            saved = unpack(positions)
+            if len(saved["obs"]) == self.num_envs and self.gym.continue_from(saved["envs"], now=True):
+                self._obs = np.asarray(saved["obs"]).copy()
+                self.rng.bit_generator.state = saved["rng"]

@@ -1,0 +1,83 @@
+"""One pipeline at three scales: FastCollector is a TorchRL collector that TorchRL's own multi-process
+collector runs, workers resume their episodes exactly, and the observation formula exists once."""
+
+import functools
+
+import numpy as np
+import torch
+from torchrl.collectors import Collector, MultiSyncCollector
+
+from ppo_torchrl.collectors import describe_backend, make_collector
+from ppo_torchrl.collectors.fast import FastCollector
+from ppo_torchrl.envs import env_spec, make_torchrl_env
+from ppo_torchrl.models import make_actor_critic
+from ppo_torchrl.normalization import make_observation_normalizer, standardize
+
+
+def test_torchrls_multisync_collector_runs_the_fast_collector_as_its_collector_class(tiny_cfg):
+    cfg = tiny_cfg()
+    ac = make_actor_critic(cfg.policy, env_spec(cfg.env))
+    assert issubclass(FastCollector, Collector)
+    make_env = functools.partial(make_torchrl_env, cfg.env, clip_actions=ac.head == "normal", gamma=0.99)
+    collector = MultiSyncCollector([make_env, make_env], ac.actor, collector_class=FastCollector,
+                                   frames_per_batch=128, total_frames=256, cat_results="stack")
+    try:
+        batches = [batch for batch in collector]
+    finally:
+        collector.shutdown()
+    assert len(batches) == 2 and tuple(batches[0].shape) == (2, 1, 64)  # [workers, envs, steps]
+    for key in ("observation", "action", ("next", "reward"), ("next", "episode_reward"), ("collector", "traj_ids")):
+        assert key in batches[0].keys(True)
+    lows, highs = ac.action_low.numpy(), ac.action_high.numpy()
+    actions = batches[1]["action"].numpy()
+    assert np.isfinite(actions).all() and actions.std() > 0 and lows.shape == highs.shape
+
+
+def test_two_workers_resume_every_episode_bit_exactly(tiny_cfg):
+    """Each worker's envs, statistics, running returns and exploration RNG come back from the checkpoint:
+    the batch after a resume is the batch the uninterrupted run collects."""
+    cfg = tiny_cfg("collector.workers=2", "collector.num_envs=2", "env.max_episode_steps=40")
+    ac = make_actor_critic(cfg.policy, env_spec(cfg.env))
+    first = make_collector(cfg, ac, 3, torch.device("cpu"))
+    second = None
+    try:
+        for _ in range(2):
+            first.collect()
+        state = first.state_dict()
+        uninterrupted = first.collect()
+        second = make_collector(cfg, ac, 77, torch.device("cpu"))  # another seed: everything must come from state
+        second.load_state_dict(state)
+        resumed = second.collect()
+        for key in uninterrupted.keys(True, True):
+            assert torch.equal(uninterrupted[key], resumed[key]), key
+        assert first.obs_stats()["count"] == second.obs_stats()["count"]
+    finally:
+        first.close()
+        if second is not None:
+            second.close()
+
+
+def test_the_observation_formula_is_one_for_numpy_torch_the_transform_and_export(tiny_cfg):
+    cfg = tiny_cfg()
+    rng = np.random.default_rng(0)
+    stats = {"mean": rng.normal(size=4), "var": rng.uniform(0.0, 3.0, size=4), "count": 50.0}
+    norm = make_observation_normalizer(cfg.env.transforms, 4, stats, frozen=True)
+    obs = rng.normal(scale=30, size=(100, 4))
+    numpy_face = norm(obs)  # what the fast collector computes
+    module = norm.module()(torch.as_tensor(obs)).float().numpy()  # what export bakes in
+    env = make_torchrl_env(cfg.env, clip_actions=False, gamma=0.99, obs_stats=stats, train=False)
+    transform = next(t for t in env.transform if type(t).__name__ == "ObservationNormalization")
+    torchrl_face = transform._apply_transform(torch.as_tensor(obs)).numpy()
+    assert np.array_equal(numpy_face, module) and np.array_equal(numpy_face, torchrl_face)
+    scale = np.maximum(np.sqrt(stats["var"]), cfg.env.transforms.norm_epsilon)
+    assert np.array_equal(standardize(obs, stats["mean"], scale, 10.0), np.clip((obs - stats["mean"]) / scale, -10, 10))
+    assert np.abs(numpy_face).max() == 10.0  # clipped
+
+
+def test_the_start_line_names_the_collector_and_why(tiny_cfg):
+    assert describe_backend(tiny_cfg()) == ("FastCollector", "no env.transforms.extra")
+    assert describe_backend(tiny_cfg("collector.workers=2")) == ("MultiSyncCollector(FastCollector x 2)",
+                                                                 "no env.transforms.extra")
+    extra = "env.transforms.extra=[{_target_: torchrl.envs.CatFrames, N: 3, dim: -1, in_keys: [observation]}]"
+    assert describe_backend(tiny_cfg(extra, "collector.distributed=ray", "collector.workers=4")) == (
+        "RayCollector(torchrl.Collector x 4)", "env.transforms.extra runs per step")
