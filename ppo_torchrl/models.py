@@ -21,6 +21,7 @@ from torchrl.modules import ActorValueOperator, IndependentNormal, Probabilistic
 
 from ppo_torchrl.envs import EnvSpec
 from ppo_torchrl.errors import ConfigError
+from ppo_torchrl.normalization import clip
 
 ACTIVATIONS = {"tanh": nn.Tanh, "relu": nn.ReLU, "elu": nn.ELU}
 # The same activations in numpy, for NumpyPolicy.
@@ -159,8 +160,6 @@ class NumpyPolicy:
         self.modules = layers  # Linear, activation and GaussianParams modules, in forward order
         self.squash = squash
         self.low, self.high = low, high
-        self.mid, self.half = (self.high + self.low) / 2, (self.high - self.low) / 2
-        self.tanh_limit = np.float32(1.0 - np.finfo(np.float32).resolution)  # as torchrl's safetanh_noeps
         self.sync()
 
     @classmethod
@@ -215,18 +214,15 @@ class NumpyPolicy:
         """(action to store, action to send to the env) for observations [n, obs_dim]."""
         loc, scale = self.loc_scale(obs)
         base = (loc + scale * noise).astype(np.float32, copy=False)
-        if self.squash:  # np.clip's values without its Python wrapper (a few microseconds a step)
-            action = self.mid + self.half * np.minimum(np.maximum(np.tanh(base), -self.tanh_limit), self.tanh_limit)
-            return action, action
-        return base, np.minimum(np.maximum(base, self.low), self.high)
+        action = to_bounds(base, self.low, self.high, self.squash)
+        return (action, action) if self.squash else (base, action)
 
 
 class SamplingPolicy(nn.Module):
     """What TorchRL's Collector steps with: "observation" -> "action", drawn as the actor's distribution draws
     (TanhNormal: the squashed sample; Normal: the raw sample, which ClipActionToBounds clips for the env), with
     plain tensor ops over the actor's own net. It builds no distribution object and no log-probability per
-    step (the trainer computes log-probabilities once per batch, as for the fast collector): 1.6x the frames
-    per second of the ProbabilisticActor in TorchRL's Collector (benchmarks/speed.py, extra transforms)."""
+    step (the trainer computes log-probabilities once per batch, as for the fast collector)."""
 
     def __init__(self, ac: ActorCritic):
         super().__init__()
@@ -245,15 +241,17 @@ def sampling_policy(ac: ActorCritic) -> TensorDictModule:
     return TensorDictModule(SamplingPolicy(ac), in_keys=["observation"], out_keys=["action"])
 
 
-def to_bounds(loc: torch.Tensor, low: torch.Tensor, high: torch.Tensor, squash: bool) -> torch.Tensor:
-    """The one map from the policy mean to an action in [low, high]: TanhNormal's squash or the Normal head's
-    clip. `evaluate` and an exported policy.pt both take it. The squash is the forward pass of TorchRL's
-    `safetanh_noeps` (tanh clamped 1 - resolution inside the bounds) as plain tensor ops, which TorchScript
-    can export (its autograd.Function cannot); tests/test_models.py checks it against TorchRL's TanhNormal."""
+def to_bounds(loc, low, high, squash: bool):
+    """The one map from a draw or the mean to an action in [low, high], for torch tensors and numpy arrays alike:
+    TanhNormal's squash or the Normal head's clip. `evaluate`, an exported policy.pt, the lean draw of TorchRL's
+    Collector and the fast collector's numpy draw all take it. The squash is the forward pass of TorchRL's
+    `safetanh_noeps` (tanh clamped 1 - resolution inside the bounds) as plain ops, which TorchScript can export
+    (its autograd.Function cannot); tests/test_models.py checks it against TorchRL's TanhNormal."""
+    tensor = isinstance(loc, torch.Tensor)
     if squash:
-        limit = 1.0 - torch.finfo(loc.dtype).resolution
-        return (high + low) / 2 + (high - low) / 2 * loc.tanh().clamp(-limit, limit)
-    return torch.maximum(torch.minimum(loc, high), low)
+        limit = 1.0 - (torch.finfo(loc.dtype) if tensor else np.finfo(loc.dtype)).resolution
+        return (high + low) / 2 + (high - low) / 2 * clip(loc.tanh() if tensor else np.tanh(loc), limit)
+    return torch.maximum(torch.minimum(loc, high), low) if tensor else np.minimum(np.maximum(loc, low), high)
 
 
 def deterministic_action(ac: ActorCritic, loc: torch.Tensor) -> torch.Tensor:

@@ -81,3 +81,28 @@ def test_the_start_line_names_the_collector_and_why(tiny_cfg):
     extra = "env.transforms.extra=[{_target_: torchrl.envs.CatFrames, N: 3, dim: -1, in_keys: [observation]}]"
     assert describe_backend(tiny_cfg(extra, "collector.distributed=ray", "collector.workers=4")) == (
         "RayCollector(torchrl.Collector x 4)", "env.transforms.extra runs per step")
+
+
+def test_a_change_to_the_one_formula_reaches_every_face(tiny_cfg, monkeypatch):
+    """`normalization.standardize` changed in its one place: the fast rollout, TorchRL's Collector's env, the
+    evaluation env and the exported module all follow."""
+    import ppo_torchrl.normalization as normalization
+
+    monkeypatch.setattr(normalization, "standardize", lambda x, mean, scale, bound: x * 0 + 7)
+    cfg = tiny_cfg()
+    ac = make_actor_critic(cfg.policy, env_spec(cfg.env))
+    stats = {"mean": np.zeros(4), "var": np.ones(4), "count": 1.0}
+    fast = FastCollector(make_torchrl_env(cfg.env, clip_actions=ac.head == "normal", gamma=0.99, seed=0), ac.actor,
+                         frames_per_batch=32, total_frames=32)
+    stock = Collector(make_torchrl_env(cfg.env, clip_actions=ac.head == "normal", gamma=0.99, seed=0), ac.actor,
+                      frames_per_batch=32, total_frames=32, auto_register_policy_transforms=False)
+    evaluation = make_torchrl_env(cfg.env, clip_actions=False, gamma=0.99, obs_stats=stats, train=False)
+    exported = make_observation_normalizer(cfg.env.transforms, 4, stats, frozen=True).module()
+    try:
+        for batch in (next(iter(fast)), next(iter(stock))):
+            assert (batch["observation"] == 7).all() and (batch["next", "observation"] == 7).all()
+        assert (evaluation.reset()["observation"] == 7).all()
+        assert (exported(torch.randn(3, 4, dtype=torch.float64)) == 7).all()
+    finally:
+        fast.shutdown()
+        stock.shutdown()

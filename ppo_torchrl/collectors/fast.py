@@ -38,7 +38,9 @@ def unpack(blob) -> object:
 
 class FastCollector(Collector):
     def __init__(self, create_env_fn, policy=None, *, frames_per_batch: int, **kwargs):
-        kwargs["use_buffers"] = False  # each rollout is a new TensorDict
+        # One output TensorDict, filled in place by each rollout: TorchRL's worker processes then share its memory
+        # with the main process once, not each batch's new tensors (use_buffers).
+        kwargs["use_buffers"] = True
         kwargs.setdefault("auto_register_policy_transforms", False)
         env = create_env_fn if isinstance(create_env_fn, EnvBase) else create_env_fn(**(kwargs.pop("create_env_kwargs", None) or {}))
         transforms = list(env.transform) if isinstance(env, TransformedEnv) else []
@@ -58,6 +60,7 @@ class FastCollector(Collector):
         self._obs: Optional[np.ndarray] = None  # the normalized observation each env's policy acts on next
         self._counted = False  # whether the statistics have seen the envs' current observations
         self._traj_ids = np.arange(self.num_envs)  # ("collector", "traj_ids"): a new id for each new episode
+        self._out: Optional[TensorDict] = None
 
     def set_seed(self, seed: int, static_seed: bool = False) -> int:
         out = super().set_seed(seed, static_seed)
@@ -127,34 +130,36 @@ class FastCollector(Collector):
         self._obs = obs
 
         def tensor(x: np.ndarray) -> torch.Tensor:  # [steps, n, ...] -> [n, steps, ...]
-            return torch.from_numpy(np.ascontiguousarray(np.swapaxes(x, 0, 1))).to(self.storing_device)
+            return torch.from_numpy(np.ascontiguousarray(np.swapaxes(x, 0, 1)))
 
-        terminated = tensor(term_buf).unsqueeze(-1)
-        truncated = tensor(trunc_buf).unsqueeze(-1)
-        return TensorDict(
-            {
-                "observation": tensor(obs_buf),
-                "action": tensor(act_buf),
-                "collector": {"traj_ids": tensor(traj_buf)},
-                "next": {
-                    "observation": tensor(next_buf),
-                    "reward": tensor(rew_buf).unsqueeze(-1),
-                    "terminated": terminated,
-                    "truncated": truncated,
-                    "done": terminated | truncated,
-                    "episode_reward": tensor(ep_return).unsqueeze(-1),
-                    "step_count": tensor(ep_length).unsqueeze(-1),
-                },
-            },
-            batch_size=[n, steps],
-            device=self.storing_device,
-        )
+        terminated, truncated = tensor(term_buf).unsqueeze(-1), tensor(trunc_buf).unsqueeze(-1)
+        batch = {
+            "observation": tensor(obs_buf),
+            "action": tensor(act_buf),
+            ("collector", "traj_ids"): tensor(traj_buf),
+            ("next", "observation"): tensor(next_buf),
+            ("next", "reward"): tensor(rew_buf).unsqueeze(-1),
+            ("next", "terminated"): terminated,
+            ("next", "truncated"): truncated,
+            ("next", "done"): terminated | truncated,
+            ("next", "episode_reward"): tensor(ep_return).unsqueeze(-1),
+            ("next", "step_count"): tensor(ep_length).unsqueeze(-1),
+        }
+        if self._out is None:
+            self._out = TensorDict(batch_size=[n, steps], device=self.storing_device)
+            for key, value in batch.items():
+                self._out.set(key, value.to(self.storing_device))
+        else:
+            for key, value in batch.items():
+                self._out.get(key).copy_(value)
+        return self._out
 
     def state_dict(self):
         """TorchRL's (the env's transforms hold the statistics), and where each env is ("positions": the
         simulator, the episode so far, the observation acted on next, and the exploration RNG) so a
         resumed run continues bit-exactly; "env_metrics" for the main process of a multi-process run."""
         state = super().state_dict()
+        state.pop("policy_state_dict", None)  # the learner holds the weights (and sends them before each batch)
         state["positions"] = pack({"envs": self.gym.positions(), "obs": self._current_obs().copy(),
                                    "rng": self.rng.bit_generator.state})
         state["env_metrics"] = pack(self.gym.env_metrics())
