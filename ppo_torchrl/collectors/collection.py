@@ -147,10 +147,19 @@ class Collection:
                 keys["reward"] = f"{name}._extra_state"
         return keys
 
+    def _collector_state(self):
+        """The collector's `state_dict()`; with workers, a dead one is one line naming it (dead_worker_error)."""
+        try:
+            return self.collector.state_dict()
+        except Exception:
+            if self.multi:
+                dead_worker_error(self.collector)
+            raise
+
     def _worker_states(self) -> Tuple[object, list]:
         """The collector's state (MultiSyncCollector: {"worker0": ..., "frames": ...}; Ray: a list),
         and each worker's part of it."""
-        whole = self.collector.state_dict()
+        whole = self._collector_state()
         return whole, [whole[f"worker{i}"] for i in range(self.collector.num_workers)] \
             if isinstance(whole, dict) else list(whole)
 
@@ -192,7 +201,7 @@ class Collection:
         reward = self.reward_norm.state_dict()
         state = {"obs": self.obs_stats(), "obs_frozen": self.obs_norm.frozen,
                  "return": {k: reward[k] for k in ("mean", "var", "count")}}
-        whole = self.collector.state_dict()
+        whole = self._collector_state()
         parts = [whole[k] for k in whole if str(k).startswith("worker")] if isinstance(whole, dict) and self.multi \
             else (list(whole) if self.multi else [whole])
         for part in parts:
