@@ -24,7 +24,8 @@ METRICS = [("train_return_last100", "train return (last 100)"), ("eval_return_me
 
 def collector_name(summary: dict, config: dict) -> str:
     c = config["collector"]
-    return c["backend"] + (f"_workers{c['workers']}" if c.get("workers", 1) > 1 else "")
+    backend = c["backend"] if c["backend"] != "auto" else ("torchrl" if config["env"]["transforms"].get("extra") else "fast")
+    return backend + (f"_workers{c['workers']}" if c.get("workers", 1) > 1 else "")
 
 
 def command_of(sweep: Path) -> str:
