@@ -52,7 +52,7 @@ def main() -> None:
             for name, overrides in VARIANTS.items():
                 runs.setdefault((env, name), []).append(measure(env, overrides))
                 print(env, name, r + 1, runs[env, name][-1], flush=True)
-    lines = [f"# One run on one and two processes, the same total env count (2), in-loop frames/s", "",
+    lines = ["# One run on one and two processes, the same total env count (2), in-loop frames/s", "",
              f"`python benchmarks/workers.py --rounds {args.rounds}` ({stamp}, 2-core CPU, {args.beside}); "
              "compile=true; each figure: the last 6 of 8 batches of 2048 frames (benchmarks/inloop.py).", "",
              "| env | variant | frames/s per round | mean +- sample std | collect ms / batch | update ms / batch |",

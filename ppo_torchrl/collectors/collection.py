@@ -139,12 +139,13 @@ class Collection:
     # ---------------------------------------------------------------- statistics across workers
     def _stat_keys(self) -> Dict[str, str]:
         """The transforms' state-dict keys of the statistics ("obs", "reward"): the same in every worker."""
+        names = list(self.env.transform.state_dict())  # each normalization module holds one entry: its state
         keys = {}
         for name, module in self.env.transform.named_modules():
-            if isinstance(module, ObservationNormalization):
-                keys["obs"] = f"{name}._extra_state"
-            elif isinstance(module, RewardNormalization):
-                keys["reward"] = f"{name}._extra_state"
+            kind = "obs" if isinstance(module, ObservationNormalization) else \
+                "reward" if isinstance(module, RewardNormalization) else None
+            if kind is not None:
+                keys[kind] = next(key for key in names if key.startswith(f"{name}."))
         return keys
 
     def _collector_state(self):
