@@ -255,7 +255,9 @@ class EvalConfig:
     episodes: int = 5
     final_episodes: int = 10  # at the end of training; 0 disables
     deterministic: bool = True
-    video: bool = False  # film the first episode of each eval into <run dir>/videos/ (MUJOCO_GL=egl)
+    video: bool = False  # film each eval into <run dir>/videos/eval_<frames>.mp4 (MUJOCO_GL=egl), in real time
+    video_episodes: List[int] = field(default_factory=lambda: [0])  # which episodes of an eval, from 0: one mp4
+    video_length: Optional[float] = None  # at most this many (simulated) seconds of video; null: whole episodes
     # Also report the share of episodes that end beyond this x (m). A step env (a model with a `step`
     # body) reports its own instead: the main body env.terrain.success_margin beyond the step's edge.
     success_x: Optional[float] = None

@@ -105,20 +105,23 @@ class BackgroundEval:
         while self._waiting and self._waiting[0]["frames"] not in self._pending:
             self._write_row(self._waiting.pop(0))
 
-    def evaluate(self, ac, obs_stats, episodes: int, seed: int, deterministic: bool, video_path=None) -> dict:
+    def evaluate(self, ac, obs_stats, episodes: int, seed: int, deterministic: bool, video_path=None,
+                 video_episodes=(0,), video_length=None) -> dict:
         """An eval now (the final one, after `poll(block=True)`), its episodes shared with the idle worker:
         each episode starts from its own seed, so the figures are those of `evaluate_policy` in line, in
         about half the time. Stochastic evals (the worker's own random stream) and robot envs (whose eval
         env may carry state, e.g. a terrain curriculum, from episode to episode) run wholly in line."""
-        if episodes < 2 or not deterministic or self._cfg.env.xml_file is not None or self._pending:
-            return evaluate_policy(self._cfg, ac, obs_stats, episodes, seed=seed, deterministic=deterministic,
-                                   video_path=video_path)
-        seeds = episode_seeds(seed, episodes)
         half = episodes // 2
+        filmed_here = video_path is None or max(video_episodes) < half  # the filmed episodes are this process's
+        if episodes < 2 or not deterministic or self._cfg.env.xml_file is not None or self._pending or not filmed_here:
+            return evaluate_policy(self._cfg, ac, obs_stats, episodes, seed=seed, deterministic=deterministic,
+                                   video_path=video_path, video_episodes=video_episodes, video_length=video_length)
+        seeds = episode_seeds(seed, episodes)
         actor = {k: v.detach().to("cpu", copy=True) for k, v in ac.actor.state_dict().items()}
         self._put({"frames": None, "actor": actor, "obs_stats": copy.deepcopy(obs_stats), "seeds": seeds[half:],
                    "seed": seed, "deterministic": True})
-        mine = run_episodes(self._cfg, ac, obs_stats, seeds[:half], True, video_path)
+        mine = run_episodes(self._cfg, ac, obs_stats, seeds[:half], True, video_path,
+                            video_episodes=video_episodes, video_length=video_length)
         return summarize(self._cfg, merge_episodes(mine, self._receive(block=True)[1]))
 
     def _receive(self, block: bool):
@@ -185,6 +188,7 @@ def _serve(cfg_dict: dict, jobs, results, parent_pid: int) -> None:
             else:
                 result = evaluate_policy(cfg, ac, job["obs_stats"], job["episodes"], seed=job["seed"],
                                          deterministic=job["deterministic"], video_path=job["video_path"],
+                                         video_episodes=job["video_episodes"], video_length=job["video_length"],
                                          progress=False)
             results.put((job["frames"], result, None))
         except Exception as exc:  # noqa: BLE001  raised again in the trainer, as one line or as a bug

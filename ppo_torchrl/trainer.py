@@ -327,7 +327,8 @@ class Trainer:
     def _evaluate(self, episodes: int, background: bool = False) -> dict:
         """The eval's metrics columns; in the background ({} now), the worker gets a copy of what it needs."""
         video = self.run_dir / "videos" / f"eval_{self.frames:010d}.mp4" if self.cfg.eval.video else None
-        job = dict(seed=self.cfg.seed + 10_000, deterministic=self.cfg.eval.deterministic, video_path=video)
+        job = dict(seed=self.cfg.seed + 10_000, deterministic=self.cfg.eval.deterministic, video_path=video,
+                   video_episodes=list(self.cfg.eval.video_episodes), video_length=self.cfg.eval.video_length)
         if background:
             actor = {k: v.detach().to("cpu", copy=True) for k, v in self.ac.actor.state_dict().items()}
             keep = copy.deepcopy(self.state_dict()) if self.cfg.checkpoint.save_best else None  # best.pt if it wins

@@ -103,6 +103,11 @@ def validate_config(cfg):
         (env.locomotion.frame_skip >= 1, f"env.locomotion.frame_skip={env.locomotion.frame_skip} must be >= 1"),
         (cfg.eval.every_frames >= 0 and cfg.eval.episodes >= 1 and cfg.eval.final_episodes >= 0,
          "eval.every_frames and eval.final_episodes must be >= 0 and eval.episodes >= 1"),
+        (len(cfg.eval.video_episodes) >= 1 and all(0 <= e < cfg.eval.episodes for e in cfg.eval.video_episodes),
+         f"eval.video_episodes={list(cfg.eval.video_episodes)} must name episodes in 0..{cfg.eval.episodes - 1} "
+         f"(eval.episodes={cfg.eval.episodes}), e.g. [0] or [0,3]"),
+        (positive_or_null(cfg.eval.video_length),
+         f"eval.video_length={cfg.eval.video_length} must be > 0 seconds (or null: whole episodes)"),
         (cfg.checkpoint.every_frames >= 0 and cfg.checkpoint.keep_last >= 0,
          "checkpoint.every_frames and checkpoint.keep_last must be >= 0"),
         one_of("logger", cfg.logger.name, LOGGERS),

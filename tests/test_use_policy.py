@@ -39,6 +39,21 @@ def test_video_during_training(trained_run):
     assert all(v.stat().st_size > 1000 for v in videos)
 
 
+def test_training_videos_film_the_episodes_and_length_asked(tmp_path):
+    """eval.video_episodes / eval.video_length: the second episode only, at most 0.2 s (25 fps: 5 frames)."""
+    from conftest import TINY, compose_config
+
+    cfg = compose_config(["env=InvertedPendulum-v4", *TINY, "eval.every_frames=256", "eval.episodes=2",
+                          "eval.final_episodes=0", "eval.background=false", "eval.video=true",
+                          "eval.video_episodes=[1]", "eval.video_length=0.2"])
+    trainer = Trainer(cfg, tmp_path)
+    trainer.train()
+    video = trainer.last_eval["video"]
+    assert video["episodes"] == [1] and video["fps"] == 25
+    frames = imageio.get_reader(tmp_path / "videos" / "eval_0000000256.mp4").count_frames()
+    assert frames == video["frames"] == min(5, trainer.last_eval["lengths"][1])
+
+
 def test_evaluate_cli_writes_json_and_video(trained_run):
     result = run_cli(f"run={trained_run}", "episodes=2", "video=true", module="ppo_torchrl.evaluate")
     assert result.returncode == 0, result.stderr[-2000:]
