@@ -27,7 +27,7 @@ from tensordict import TensorDict
 from torchrl.collectors import Collector
 
 from ppo_torchrl.collectors.choice import resolve_backend
-from ppo_torchrl.collectors.fast import FastCollector, unpack
+from ppo_torchrl.collectors.fast import FastCollector, open_state, packed_state
 from ppo_torchrl.collectors.multiprocess import (
     dead_worker_error,
     make_multi_collector,
@@ -159,15 +159,15 @@ class Collection:
 
     def _worker_states(self) -> Tuple[object, list]:
         """The collector's state (MultiSyncCollector: {"worker0": ..., "frames": ...}; Ray: a list),
-        and each worker's part of it."""
+        and each worker's part of it, opened (fast.open_state)."""
         whole = self._collector_state()
-        return whole, [whole[f"worker{i}"] for i in range(self.collector.num_workers)] \
-            if isinstance(whole, dict) else list(whole)
+        parts = [whole[f"worker{i}"] for i in range(self.collector.num_workers)] if isinstance(whole, dict) \
+            else list(whole)
+        return whole, [open_state(part) for part in parts]
 
     def _merge_stats(self) -> None:
         whole, workers = self._worker_states()
-        metrics = [unpack(w["env_metrics"]) for w in workers if "env_metrics" in w]
-        metrics = [m for m in metrics if m]
+        metrics = [w["env_metrics"] for w in workers if w.get("env_metrics")]
         self._metrics = {k: float(np.mean([m[k] for m in metrics])) for k in metrics[0]} if metrics else {}
         if "obs" in self._keys:
             obs = pooled(self._base.get("obs"), [to_numpy(w["env_state_dict"][self._keys["obs"]]) for w in workers])
@@ -192,7 +192,9 @@ class Collection:
                 env_state[self._keys["reward"]] = {**reward, "returns": own["returns"]}
             w.pop("positions", None)  # each env stays where it is
             w.pop("env_metrics", None)
-        self.collector.load_state_dict(whole)
+        parts = [packed_state(w) if self.fast else w for w in workers]
+        self.collector.load_state_dict({**whole, **{f"worker{i}": p for i, p in enumerate(parts)}}
+                                       if isinstance(whole, dict) else parts)
         self._base = {"obs": obs, "reward": reward}
 
     # ---------------------------------------------------------------- checkpoints

@@ -26,14 +26,20 @@ from ppo_torchrl.normalization import stats_of
 from ppo_torchrl.positions import GymEnvs
 
 
-def pack(obj) -> torch.Tensor:
-    """A Python object as a uint8 tensor: TorchRL's worker processes pass state dicts through TensorDict,
-    which only carries tensors (an RNG state holds 128-bit integers)."""
-    return torch.frombuffer(bytearray(pickle.dumps(obj)), dtype=torch.uint8)
+PACKED = "packed"
 
 
-def unpack(blob) -> object:
-    return pickle.loads(blob.numpy().tobytes() if isinstance(blob, torch.Tensor) else bytes(blob))
+def packed_state(state: dict) -> dict:
+    """A FastCollector state as TorchRL's worker processes pass it best: one pickled `bytes` entry. They
+    turn a state dict into a TensorDict and send each tensor through shared memory, ~2 ms apiece and
+    ~20 ms a round trip for a dozen; one `bytes` entry stays one plain message (~1 ms)."""
+    return {PACKED: pickle.dumps(state)}
+
+
+def open_state(part) -> dict:
+    """A worker's part of a collector state as a dict: FastCollector's unpacked, TorchRL's as it is."""
+    part = dict(part)
+    return pickle.loads(part[PACKED]) if PACKED in part else part
 
 
 class FastCollector(Collector):
@@ -155,24 +161,25 @@ class FastCollector(Collector):
         return self._out
 
     def state_dict(self):
-        """TorchRL's (the env's transforms hold the statistics), and where each env is ("positions": the
-        simulator, the episode so far, the observation acted on next, and the exploration RNG) so a
-        resumed run continues bit-exactly; "env_metrics" for the main process of a multi-process run."""
+        """TorchRL's (the env's transforms hold the statistics) and where each env is ("positions": the
+        simulator, the episode so far, the observation acted on next and the exploration RNG, so a
+        resumed run continues bit-exactly), "env_metrics" for the main process of a multi-process run;
+        packed in one entry (packed_state). The policy's weights are left out: the learner holds them
+        and sends them before each batch."""
         state = super().state_dict()
-        state.pop("policy_state_dict", None)  # the learner holds the weights (and sends them before each batch)
-        state["positions"] = pack({"envs": self.gym.positions(), "obs": self._current_obs().copy(),
-                                   "rng": self.rng.bit_generator.state})
-        state["env_metrics"] = pack(self.gym.env_metrics())
-        return state
+        state.pop("policy_state_dict", None)
+        state["positions"] = {"envs": self.gym.positions(), "obs": self._current_obs().copy(),
+                              "rng": self.rng.bit_generator.state}
+        state["env_metrics"] = self.gym.env_metrics()
+        return packed_state(state)
 
     def load_state_dict(self, state_dict, **kwargs) -> None:
-        state = dict(state_dict)
+        state = open_state(state_dict)
         positions = state.pop("positions", None)
         state.pop("env_metrics", None)
         kwargs.setdefault("strict", False)
         super().load_state_dict({"frames": self._frames, "iter": self._iter, **state}, **kwargs)
-        if positions is not None:
-            saved = unpack(positions)
-            if len(saved["obs"]) == self.num_envs and self.gym.continue_from(saved["envs"], now=True):
-                self._obs = np.asarray(saved["obs"]).copy()
-                self.rng.bit_generator.state = saved["rng"]
+        if positions is not None and len(positions["obs"]) == self.num_envs \
+                and self.gym.continue_from(positions["envs"], now=True):
+            self._obs = np.asarray(positions["obs"]).copy()
+            self.rng.bit_generator.state = positions["rng"]
