@@ -109,7 +109,7 @@ def make_ray_collector(c, make_env: list, policy, kwargs: dict):
         check_reachable(c.ray_address)
         try:
             ray.init(address=c.ray_address, include_dashboard=False, log_to_driver=False,
-                     configure_logging=True, logging_level="warning")
+                     configure_logging=True, logging_level="error")  # not its notices
         except (ConnectionError, RuntimeError, ValueError) as exc:
             detail = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
             raise ConfigError(f"cannot start or join {where}: {detail}") from None
