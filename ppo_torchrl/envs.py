@@ -17,7 +17,7 @@ from typing import Optional, Sequence
 import gymnasium as gym
 import numpy as np
 import torch
-from torchrl.envs import Compose, GymWrapper, RewardSum, StepCounter, Transform, TransformedEnv
+from torchrl.envs import Compose, GymWrapper, Transform, TransformedEnv
 
 from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.normalization import (
@@ -349,8 +349,7 @@ def make_torchrl_env(
     if clip_actions:  # Normal head: the env gets the clipped action, the batch keeps the sample
         spec = base.action_spec
         transforms.append(ClipActionToBounds(spec.space.low, spec.space.high))
-    # RewardSum and StepCounter see raw rewards: logged returns are never the normalized ones.
-    transforms += [RewardSum(), StepCounter(), ObservationNormalization(obs_norm)]  # float64 in, float32 out
+    transforms.append(ObservationNormalization(obs_norm))  # float64 in, float32 out
     transforms += extra_transforms(env_cfg)
     if train:
         transforms.append(RewardNormalization(make_reward_normalizer(t, num_envs, gamma)))

@@ -8,8 +8,11 @@ through the public transform chain:
   RNG, the episode so far, the observation the policy acts on next): a resumed run continues its
   episodes as the uninterrupted run would;
 - `env_metrics()`: the scalars a step env keeps (curriculum level, recent success rate);
-- `evaluate` films and measures the env through `gym_envs[0]`.
-Each env's episode return and length are Gymnasium's `RecordEpisodeStatistics` (the library's counter).
+- `evaluate` films and measures the env through `gym_envs[0]`;
+- the episode so far: each env's return and length are Gymnasium's `RecordEpisodeStatistics` (the
+  library's counter, which a resumed episode carries on), written to every step and reset as TorchRL's
+  `episode_reward` / `step_count` (RewardSum's and StepCounter's keys). The fast collector reads the same
+  counters, so every path logs the same episodes.
 
 Reaching into Gymnasium: a bit-exact continuation needs the `TimeLimit` counter (`_elapsed_steps`),
 which Gymnasium keeps private; `get_env_state` / `set_env_state` are the one place that reads it.
@@ -21,7 +24,9 @@ from typing import Dict, List, Optional
 
 import gymnasium as gym
 import numpy as np
+import torch
 from tensordict import TensorDictBase
+from torchrl.data import Composite, Unbounded
 from torchrl.envs.transforms import Transform
 
 from ppo_torchrl.errors import ConfigError
@@ -115,18 +120,41 @@ def resumable(env: gym.Env) -> ResumableReset:
     return ResumableReset(gym.wrappers.RecordEpisodeStatistics(env))
 
 
+EPISODE_KEYS = ("episode_reward", "step_count")
+
+
 class GymEnvs(Transform):
-    """Holds the Gymnasium envs under the wrapper (in env order); passes the data through unchanged."""
+    """Holds the Gymnasium envs under the wrapper (in env order) and writes each env's episode so far
+    (`episode_reward`, `step_count`: raw return and length) from their counters."""
 
     def __init__(self, envs: List[ResumableReset]):
-        super().__init__(in_keys=[], out_keys=[])
+        super().__init__(in_keys=[], out_keys=list(EPISODE_KEYS))
         self.gym_envs = envs
 
+    def episodes(self) -> tuple:
+        """The return and length of each env's episode so far: ([n], [n]) arrays."""
+        records = [env.record for env in self.gym_envs]
+        return (np.array([r.episode_returns for r in records], np.float32),
+                np.array([r.episode_lengths for r in records], np.int64))
+
+    def _write_episodes(self, data: TensorDictBase) -> TensorDictBase:
+        shape = self.parent.batch_size + (1,)
+        returns, lengths = self.episodes()
+        data.set("episode_reward", torch.from_numpy(returns).reshape(shape))
+        data.set("step_count", torch.from_numpy(lengths).reshape(shape))
+        return data
+
     def _call(self, next_tensordict: TensorDictBase) -> TensorDictBase:
-        return next_tensordict
+        return self._write_episodes(next_tensordict)
 
     def _reset(self, tensordict: TensorDictBase, tensordict_reset: TensorDictBase) -> TensorDictBase:
-        return tensordict_reset
+        return self._write_episodes(tensordict_reset)
+
+    def transform_observation_spec(self, observation_spec: Composite) -> Composite:
+        shape = self.parent.batch_size + (1,)
+        observation_spec["episode_reward"] = Unbounded(shape=shape, dtype=torch.float32)
+        observation_spec["step_count"] = Unbounded(shape=shape, dtype=torch.int64)
+        return observation_spec
 
     def positions(self) -> list:
         return [env.position() for env in self.gym_envs]

@@ -4,6 +4,7 @@ collector runs, workers resume their episodes exactly, and the observation formu
 import functools
 
 import numpy as np
+import pytest
 import torch
 from torchrl.collectors import Collector, MultiSyncCollector
 
@@ -106,3 +107,32 @@ def test_a_change_to_the_one_formula_reaches_every_face(tiny_cfg, monkeypatch):
     finally:
         fast.shutdown()
         stock.shutdown()
+
+
+def test_episode_counts_have_one_owner_gymnasiums_counter_which_a_resumed_episode_carries_on(tiny_cfg):
+    """TorchRL's path writes `episode_reward` / `step_count` from Gymnasium's RecordEpisodeStatistics (as
+    the fast rollout reads them): the raw return so far, and after a restored position the saved episode
+    goes on counting from where it was, not from 0."""
+    from ppo_torchrl.positions import GymEnvs
+
+    cfg = tiny_cfg()
+    stats = {"mean": np.zeros(4), "var": np.ones(4), "count": 2.0}
+    make = functools.partial(make_torchrl_env, cfg.env, clip_actions=True, gamma=0.99, obs_stats=stats, train=False,
+                             num_envs=2, seed=3)
+    env = make()
+    rollout = env.rollout(12, break_when_any_done=False)
+    reward, done = rollout["next", "reward"].squeeze(-1), rollout["next", "done"].squeeze(-1)
+    gym = next(t for t in env.transform if isinstance(t, GymEnvs))
+    returns, lengths = gym.episodes()
+    for i in range(2):  # the episode so far since each env's last done
+        start = int(done[i, :-1].nonzero().max()) + 1 if done[i, :-1].any() else 0
+        assert rollout["next", "step_count"][i, -1].item() == lengths[i] == 12 - start
+        assert rollout["next", "episode_reward"][i, -1].item() == pytest.approx(float(reward[i, start:].sum()), rel=1e-5)
+    assert "RewardSum" not in str(env.transform) and "StepCounter" not in str(env.transform)
+
+    again = make()
+    again_gym = next(t for t in again.transform if isinstance(t, GymEnvs))
+    assert again_gym.continue_from(gym.positions(), now=False)
+    first = again.reset()
+    assert first["step_count"].squeeze(-1).tolist() == lengths.tolist()
+    np.testing.assert_allclose(first["episode_reward"].squeeze(-1).numpy(), returns)

@@ -2,8 +2,8 @@
 `RayCollector`, each stepping `FastCollector` or TorchRL's `Collector`.
 
 - batches: TorchRL's, reshaped to [envs, steps];
-- finished episodes: read from the batch (RewardSum's `episode_reward`, StepCounter's `step_count`),
-  wherever the envs live;
+- finished episodes: read from the batch (`episode_reward`, `step_count`: Gymnasium's episode counters,
+  positions.GymEnvs), wherever the envs live;
 - statistics: the env's normalization transforms (normalization.py) own them. With several workers
   each worker's set grows during a batch; after it, what every worker added since the last merge is
   pooled exactly (`normalization.pool`) into `self.env` (the main process's copy, never stepped) and
@@ -85,9 +85,6 @@ class Collection:
         self._metrics: Dict[str, float] = {}
         self._iterator = iter(self.collector)
         self._finished: List[Tuple[float, int]] = []
-        envs = c.num_envs * (c.workers if self.multi else 1)
-        self._episode = np.zeros((2, envs))  # TorchRL's Collector: (return, length) of each env's episode so far
-        self._before_resume = np.zeros((2, envs))  # what a resumed episode had done before the checkpoint
 
     # ---------------------------------------------------------------- collecting
     def collect(self) -> TensorDict:
@@ -111,16 +108,8 @@ class Collection:
         returns = batch.get(("next", "episode_reward")).squeeze(-1)
         lengths = batch.get(("next", "step_count")).squeeze(-1)
         for i in range(batch.shape[0]):  # episodes in env order, as they ended
-            ended = done[i].nonzero().squeeze(-1).tolist()
-            for k, t in enumerate(ended):
-                before = self._before_resume[:, i] if k == 0 else (0.0, 0)
-                self._finished.append((float(returns[i, t]) + before[0], int(lengths[i, t]) + int(before[1])))
-            if ended:
-                self._before_resume[:, i] = 0.0
-        last_done = done[:, -1].numpy()
-        self._episode = np.where(last_done, 0.0, np.stack([returns[:, -1].double().numpy(),
-                                                           lengths[:, -1].double().numpy()]))
-        self._episode += np.where(last_done, 0.0, self._before_resume)
+            for t in done[i].nonzero().squeeze(-1).tolist():
+                self._finished.append((float(returns[i, t]), int(lengths[i, t])))
 
     def pop_episodes(self) -> List[Tuple[float, int]]:
         """(raw return, length) of the episodes finished since the last call."""
@@ -210,8 +199,8 @@ class Collection:
         for part in parts:
             part.pop("policy_state_dict", None)
         state["collector"] = whole
-        if not self.fast:
-            state.update(positions=self.gym.positions() if not self.multi else None, episode=self._episode.copy())
+        if not self.fast and not self.multi:
+            state["positions"] = self.gym.positions()
         return state
 
     def load_state_dict(self, state: dict) -> None:
@@ -243,8 +232,6 @@ class Collection:
         self.collector = self._new_collector(self.env)
         self.obs_norm.freeze(was_frozen)
         self._iterator = iter(self.collector)
-        self._before_resume = np.asarray(state["episode"], np.float64).copy()
-        self._episode = self._before_resume.copy()
 
     def close(self) -> None:
         self.collector.shutdown()

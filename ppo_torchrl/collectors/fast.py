@@ -6,8 +6,9 @@ arguments TorchRL's `MultiSyncCollector`, `MultiAsyncCollector` and `RayCollecto
 `rollout()` differs: a numpy copy of the actor's net (`NumpyPolicy`) draws each action, and the env's
 Gymnasium envs (positions.GymEnvs) are stepped directly, the observation and reward going through the
 numpy face of the env's own normalization transforms; no per-step TensorDict or torch op, so the
-per-step cost is close to the simulator's own. The batch has TorchRL's layout and keys, RewardSum's and
-StepCounter's included (from Gymnasium's RecordEpisodeStatistics), [num_envs, steps].
+per-step cost is close to the simulator's own. The batch has TorchRL's layout and keys, [num_envs, steps],
+`episode_reward` / `step_count` included (Gymnasium's RecordEpisodeStatistics, as positions.GymEnvs writes
+them on TorchRL's path).
 """
 
 from __future__ import annotations
