@@ -134,7 +134,7 @@ class GymEnvs(Transform):
     def episodes(self) -> tuple:
         """The return and length of each env's episode so far: ([n], [n]) arrays."""
         records = [env.record for env in self.gym_envs]
-        return (np.array([r.episode_returns for r in records], np.float32),
+        return (np.array([r.episode_returns for r in records], np.float64),
                 np.array([r.episode_lengths for r in records], np.int64))
 
     def _write_episodes(self, data: TensorDictBase) -> TensorDictBase:
@@ -152,7 +152,7 @@ class GymEnvs(Transform):
 
     def transform_observation_spec(self, observation_spec: Composite) -> Composite:
         shape = self.parent.batch_size + (1,)
-        observation_spec["episode_reward"] = Unbounded(shape=shape, dtype=torch.float32)
+        observation_spec["episode_reward"] = Unbounded(shape=shape, dtype=torch.float64)  # as Gymnasium sums it
         observation_spec["step_count"] = Unbounded(shape=shape, dtype=torch.int64)
         return observation_spec
 

@@ -99,7 +99,7 @@ class FastCollector(Collector):
         act_buf = np.empty((steps, n, act_dim), np.float32)
         noise = self.rng.standard_normal((steps, n, act_dim), dtype=np.float32)
         rew_buf = np.empty((steps, n), np.float32)
-        ep_return = np.empty((steps, n), np.float32)
+        ep_return = np.empty((steps, n), np.float64)  # the counters as Gymnasium keeps them: logged exactly
         ep_length = np.empty((steps, n), np.int64)
         traj_buf = np.empty((steps, n), np.int64)
         term_buf = np.zeros((steps, n), bool)
