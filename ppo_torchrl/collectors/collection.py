@@ -150,9 +150,15 @@ class Collection:
         """The collector's state (MultiSyncCollector: {"worker0": ..., "frames": ...}; Ray: a list),
         and each worker's part of it, opened (fast.open_state)."""
         whole = self._collector_state()
-        parts = [whole[f"worker{i}"] for i in range(self.collector.num_workers)] if isinstance(whole, dict) \
+        return whole, [open_state(part) for part in self._parts(whole)]
+
+    def _parts(self, whole) -> list:
+        """Each worker's part of a collector state (MultiSyncCollector: {"worker0": ..., "frames": ...};
+        Ray: a list); in one process, the state itself."""
+        if not self.multi:
+            return [whole]
+        return [whole[f"worker{i}"] for i in range(self.collector.num_workers)] if isinstance(whole, dict) \
             else list(whole)
-        return whole, [open_state(part) for part in parts]
 
     def _merge_stats(self) -> None:
         whole, workers = self._worker_states()
@@ -194,10 +200,9 @@ class Collection:
         state = {"obs": self.obs_stats(), "obs_frozen": self.obs_norm.frozen,
                  "return": {k: reward[k] for k in ("mean", "var", "count")}}
         whole = self._collector_state()
-        parts = [whole[k] for k in whole if str(k).startswith("worker")] if isinstance(whole, dict) and self.multi \
-            else (list(whole) if self.multi else [whole])
-        for part in parts:
-            part.pop("policy_state_dict", None)
+        if not self.fast:  # FastCollector's state leaves the weights out itself
+            for part in self._parts(whole):
+                part.pop("policy_state_dict", None)
         state["collector"] = whole
         if not self.fast and not self.multi:
             state["positions"] = self.gym.positions()

@@ -107,7 +107,6 @@ class FastCollector(Collector):
         raw_next = np.empty((n, obs_dim))
         reward = np.empty(n)
         envs = self.gym.gym_envs
-        records = [env.record for env in envs]
         act, normalize, scale_rewards = policy.act, self.obs_norm, self.reward_norm
         for t in range(steps):
             obs_buf[t] = obs
@@ -115,14 +114,12 @@ class FastCollector(Collector):
             act_buf[t], to_env = act(obs, noise[t])
             reset_rows = []
             for i, env in enumerate(envs):
-                o, r, term, trunc, info = env.step(to_env[i])
+                o, r, term, trunc, _ = env.step(to_env[i])
                 raw_next[i], reward[i] = o, r
                 if term or trunc:
                     term_buf[t, i], trunc_buf[t, i] = term, trunc
-                    ep_return[t, i], ep_length[t, i] = info["episode"]["r"], info["episode"]["l"]
                     reset_rows.append(i)
-                else:
-                    ep_return[t, i], ep_length[t, i] = records[i].episode_returns, records[i].episode_lengths
+            ep_return[t], ep_length[t] = self.gym.episodes()  # each env's episode so far (before any reset)
             # The stats see every observation the env emits, as on TorchRL's path: each step's next
             # observation (a final one too), then the reset observation where an episode ended.
             next_obs = normalize(raw_next)
