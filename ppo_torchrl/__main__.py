@@ -40,15 +40,20 @@ SWEEP = {}  # the sweep dir this command claimed (prepare), for the line that en
 
 
 def main(cfg) -> float:
-    """The Hydra task function: one training run in its (already claimed) run dir."""
-    summary = guarded(_run_job, cfg)
+    """The Hydra task function: one training run in its (already claimed) run dir, or with `trial_seeds`
+    one run per seed in its seed<k>/ folder, whose objectives are averaged."""
+    return guarded(_run_job, cfg)
+
+
+def objective(summary: dict) -> float:
+    """What a sweeper maximizes: the final deterministic eval return, else the last-100 training return."""
     for key in ("eval_return_mean", "train_return_last100"):
         if summary.get(key) is not None:
             return float(summary[key])
     return float("-inf")
 
 
-def _run_job(cfg) -> dict:
+def _run_job(cfg) -> float:
     from hydra.core.hydra_config import HydraConfig
 
     from ppo_torchrl import checkpoint, rundir
@@ -67,9 +72,41 @@ def _run_job(cfg) -> dict:
     multirun = HydraConfig.get().mode.name == "MULTIRUN"
     rundir.claim(run_dir, resume=bool(cfg.resume), what="job" if multirun else "run")
     try:
-        return train(cfg, run_dir, state, next_steps=not multirun)  # a sweep ends with its report command
+        if cfg.trial_seeds:
+            return _run_seeds(cfg, run_dir)
+        return objective(train(cfg, run_dir, state, next_steps=not multirun))  # a sweep ends with its report command
     finally:
         rundir.rollback(run_dir)  # a job refused before it started training leaves its dir as it was
+
+
+def _run_seeds(cfg, run_dir: Path) -> float:
+    """trial_seeds=[6,7,8]: train each seed in turn into run_dir/seed<k>/ (an ordinary run dir each) and
+    return the mean of their objectives; trial.json holds the per-seed figures as they come."""
+    import copy
+    import statistics
+
+    from ppo_torchrl import rundir
+    from ppo_torchrl.trainer import train
+
+    rundir.commit(run_dir)  # the trial's dir is the seed runs' parent: a seed stopped midway keeps its files
+    seeds, values = list(cfg.trial_seeds), []
+    for seed in seeds:
+        seed_cfg = copy.deepcopy(cfg)
+        seed_cfg.seed, seed_cfg.trial_seeds = seed, []
+        seed_dir = run_dir / f"seed{seed}"
+        rundir.claim(seed_dir)
+        try:
+            values.append(objective(train(seed_cfg, seed_dir, None, next_steps=False)))
+        finally:
+            rundir.rollback(seed_dir)
+        mean = statistics.fmean(values)
+        rundir.atomic_write_json(run_dir / "trial.json", {
+            "seeds": seeds[:len(values)], "objective": values, "mean": mean,
+            "std": statistics.stdev(values) if len(values) > 1 else 0.0})
+        rundir.record(run_dir)
+    print(f"trial: seeds {', '.join(map(str, seeds))}: {', '.join(f'{v:.1f}' for v in values)}; mean {mean:.1f}",
+          file=sys.stderr, flush=True)
+    return mean
 
 
 def split_args(argv: list[str]) -> tuple[list[str], list[str]]:
@@ -407,7 +444,7 @@ def sweep_done(sweep_dir: Path) -> str:
     from ppo_torchrl.cli import python_command, shown_path
 
     statuses = []
-    for summary in sorted(sweep_dir.glob("*/summary.json")):
+    for summary in sorted([*sweep_dir.glob("*/summary.json"), *sweep_dir.glob("*/seed*/summary.json")]):  # trial_seeds
         try:
             statuses.append(json.loads(summary.read_text()).get("status"))
         except (OSError, ValueError, AttributeError):

@@ -83,6 +83,12 @@ class LocomotionConfig:
     body_contact_cost_weight: float = 0.0  # - w x number of geoms of non-foot bodies (trunk, thighs) on the ground
     feet_air_time_weight: float = 0.0  # + w x sum, over feet touching down, of (time in the air - feet_air_time_target)
     feet_air_time_target: float = 0.5  # s: swings shorter than this cost, longer ones pay (legged_gym: 0.5)
+    # A trot clock (four-footed robots): a phase that runs from 0 to 1 every gait_period seconds from each
+    # episode's start, given to the policy as sin and cos; the diagonal pair LF+RH is meant to be down in the
+    # first half of the period and RF+LH in the second. null: no clock. gait_clock_weight: + w x the share of
+    # feet whose contact matches that schedule (a periodic reward, Siekmann et al. 2021).
+    gait_period: Optional[float] = None
+    gait_clock_weight: float = 0.0
     # Floor each step's reward at 0 (legged_gym's only_positive_rewards): while the costs outweigh the
     # forward and healthy rewards (early, exploring), ending the episode by a fall does not pay.
     only_positive_rewards: bool = False
@@ -304,6 +310,10 @@ class Config:
     # With -m hparams_search=<file>: a tag added to the Optuna study's name, which already holds the
     # search file, env id and total_frames (conf/hparams_search), to keep apart studies they don't tell apart.
     hparams_search_name: Optional[str] = None
+    # Several seeds per run, for a study whose objective is a mean over seeds (hparams_search=optuna_seeds):
+    # the run trains each seed in turn into <run dir>/seed<k>/ and returns the mean of their objectives,
+    # written with the per-seed figures to <run dir>/trial.json. [] (the default): one run of `seed`.
+    trial_seeds: List[int] = field(default_factory=list)
 
 
 def study_name(*parts) -> str:

@@ -33,12 +33,14 @@ MANIFEST = ".ppo_torchrl.json"
 STASH = ".replaced"
 LEGACY_LOCK = ".lock"  # earlier versions locked a file of this name; a leftover one is ours
 # What the app writes, by place: `record` lists the files that match. logs/ is the loggers' (any name).
-OWNED = re.compile(r"^(?:config\.yaml|metrics\.csv|summary\.json|report\.png|policy\.pt|error\.log|__main__\.log"
-                   r"|multirun\.yaml|optimization_results\.yaml|sweep_report\.(?:png|md|csv)|\.lock"
-                   r"|\.hydra/(?:config|hydra|overrides)\.yaml|checkpoints/(?:last|best|frames_\d+)\.pt"
-                   r"|videos/[^/]+\.mp4|eval/[^/]+\.(?:json|csv|png|mp4)|logs/.+)$")
+RUN_FILES = (r"config\.yaml|metrics\.csv|summary\.json|report\.png|policy\.pt|error\.log|__main__\.log"
+             r"|\.hydra/(?:config|hydra|overrides)\.yaml|checkpoints/(?:last|best|frames_\d+)\.pt"
+             r"|videos/[^/]+\.mp4|eval/[^/]+\.(?:json|csv|png|mp4)|logs/.+")
+# A run with trial_seeds is the parent of one run dir per seed (seed<k>/, each with its own manifest).
+OWNED = re.compile(rf"^(?:{RUN_FILES}|multirun\.yaml|optimization_results\.yaml|sweep_report\.(?:png|md|csv)|\.lock"
+                   rf"|trial\.json|seed\d+/(?:{RUN_FILES}|{re.escape(MANIFEST)}))$")
 # Listed or not, these are the app's in an app's dir: a checkpoint or a temp file of a write cut short.
-UNLISTED_OK = re.compile(r"^(?:checkpoints/(?:last|best|frames_\d+)\.pt|(?:.+/)?\.[^/]+\.tmp)$")
+UNLISTED_OK = re.compile(r"^(?:(?:seed\d+/)?checkpoints/(?:last|best|frames_\d+)\.pt|(?:.+/)?\.[^/]+\.tmp)$")
 
 _held: Dict[Path, int] = {}  # dir -> open descriptor holding its lock, for the life of the process
 _pending: Dict[Path, dict] = {}  # claimed dirs not yet committed: what rollback() undoes

@@ -47,6 +47,10 @@ def validate_config(cfg):
     positive_or_null = lambda v: v is None or v > 0  # noqa: E731
     checks = [
         (0 <= cfg.seed < SEED_LIMIT, f"seed={cfg.seed} must be in [0, 2^32)"),
+        (all(0 <= s < SEED_LIMIT for s in cfg.trial_seeds) and len(set(cfg.trial_seeds)) == len(cfg.trial_seeds),
+         f"trial_seeds={list(cfg.trial_seeds)} must be distinct seeds in [0, 2^32), e.g. [6,7,8]"),
+        (not (cfg.trial_seeds and cfg.resume), "resume= continues one seed's run: give it <run dir>/seed<k> "
+                                               "and leave trial_seeds out"),
         (c.num_envs >= 1, f"collector.num_envs={c.num_envs} must be >= 1"),
         (c.frames_per_batch >= 1, f"collector.frames_per_batch={c.frames_per_batch} must be >= 1"),
         (c.num_envs < 1 or c.frames_per_batch % c.num_envs == 0,

@@ -62,6 +62,27 @@ def test_optuna_search_runs_trials_and_prints_the_best(tmp_path, capsys):
     assert capsys.readouterr().err == f"optuna: resuming study {name} with 2 trials in {storage}\n"
 
 
+def test_a_multi_seed_study_trains_each_tuning_seed_and_maximizes_their_mean(tmp_path):
+    storage = f"sqlite:///{tmp_path / 'study.db'}"
+    result = run_cli("-m", "hparams_search=optuna_seeds", "env=InvertedPendulum-v4", "trial_seeds=[6,7]",
+                     "hydra.sweeper.n_trials=1", "hydra.sweeper.n_jobs=1", *TINY, f"hydra.sweeper.storage={storage}",
+                     f"hydra.sweep.dir={tmp_path / 'sweep'}")
+    assert result.returncode == 0, result.stderr[-2000:]
+    (trial,) = (tmp_path / "sweep").glob("*/trial.json")
+    seeds = [json.loads((trial.parent / f"seed{k}" / "summary.json").read_text()) for k in (6, 7)]
+    assert [s["seed"] for s in seeds] == [6, 7] and all(s["status"] == "finished" for s in seeds)
+    record = json.loads(trial.read_text())
+    from ppo_torchrl.__main__ import objective
+
+    assert record["objective"] == [objective(s) for s in seeds]  # the final eval here (TINY), else the last 100
+    import optuna
+
+    (study,) = optuna.get_all_study_summaries(storage)
+    value = optuna.load_study(study_name=study.study_name, storage=storage).trials[0].value
+    assert value == pytest.approx(sum(record["objective"]) / 2) == record["mean"]
+    assert "sweep: 2 of 2 runs finished" in result.stderr
+
+
 def test_optuna_study_name_holds_what_defines_the_search():
     def sweeper(*overrides):
         cfg = compose_config(["env=InvertedPendulum-v4", *overrides], return_hydra_config=True)
