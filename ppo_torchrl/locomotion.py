@@ -75,7 +75,8 @@ LEGGED_KEYS = ("heading", "target_speed", "torque_limit", "joint_speed_limit", "
                "torque_cost_weight", "joint_speed_cost_weight", "joint_speed_limit_cost_weight",
                "action_rate_cost_weight", "foot_slip_cost_weight", "base_height_cost_weight", "base_height_target",
                "orientation_cost_weight", "body_contact_cost_weight", "feet_air_time_weight", "feet_air_time_target",
-               "foot_geoms", "only_positive_rewards", "terminate_on_contact", "healthy_z_above_terrain")
+               "foot_geoms", "only_positive_rewards", "terminate_on_contact", "healthy_z_above_terrain",
+               "gait_period", "gait_clock_weight")
 TERRAIN_STEP_KEYS = ("step_height", "step_height_range", "step_distance")
 
 
@@ -214,13 +215,15 @@ class LocomotionEnv(AntEnv):
         self._air_target = float(legged.get("feet_air_time_target", 0.5))
         target = legged.get("base_height_target")
         self._height_target = self._init_z if target is None else float(target)
+        self._set_up_clock(legged.get("gait_period"))
         self._needs_contacts = bool(self.observe_contacts or self._w["foot_slip_cost_weight"]
-                                    or self._w["feet_air_time_weight"] or self._w["body_contact_cost_weight"])
+                                    or self._w["feet_air_time_weight"] or self._w["body_contact_cost_weight"]
+                                    or self._w["gait_clock_weight"])
         self._dt = self.dt  # the control step (s), read from the model once
         self.measure_gait = False  # evaluate sets it: gait figures sampled every physics step
         self.gait = GaitMeter(len(self.feet), self._speed_limit, self.foot_corners)
         self._reset_episode_memory()
-        extra = len(self.feet) * self.observe_contacts + self.height_samples
+        extra = len(self.feet) * self.observe_contacts + self.height_samples + 2 * (self._period is not None)
         if extra:
             size = self.observation_space.shape[0] + extra
             self.observation_space = Box(low=-np.inf, high=np.inf, shape=(size,), dtype=np.float64)
@@ -335,6 +338,22 @@ class LocomotionEnv(AntEnv):
         corners = [("L" if y > 0 else "R") + ("F" if x > 0 else "H") for x, y in zip(ahead, left)]
         return corners if sorted(corners) == sorted(CORNERS) else None
 
+    def _set_up_clock(self, period: Optional[float]) -> None:
+        """The trot clock: which feet are meant to be down in each half of the period (the diagonal pairs)."""
+        self._period = None if period is None else float(period)
+        if self._period is None:
+            if self._w["gait_clock_weight"]:
+                raise ConfigError("env.locomotion.gait_clock_weight needs env.locomotion.gait_period (s)")
+            return
+        if self.foot_corners is None:
+            raise ConfigError("env.locomotion.gait_period needs a robot with four feet, one at each corner "
+                              f"(this model's feet: {', '.join(self.foot_names) or 'none'})")
+        first = set(FOOT_PAIRS["diagonal"][0])
+        self._first_half = np.array([c in first for c in self.foot_corners])  # down in the first half: LF, RH
+
+    def _phase(self) -> float:
+        return (self._clock_steps * self._dt / self._period) % 1.0
+
     def _set_up_contact_termination(self, names) -> None:
         model = self.model
         missing = [n for n in names if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, n) < 0]
@@ -447,6 +466,7 @@ class LocomotionEnv(AntEnv):
         self._air_time = np.zeros(len(self.feet))
         self._prev_contact = np.zeros(len(self.feet), bool)
         self._prev_feet_xy = None
+        self._clock_steps = 0  # control steps since the episode began: the trot clock's time
         self._stepped = False
         self.termination = None  # why the episode ended (step): 'contact: <body>', 'fall', ...; None while it runs
         self.gait.reset()
@@ -596,9 +616,10 @@ class LocomotionEnv(AntEnv):
         speed = x_velocity if self._heading_is_x else float(xy_velocity @ self.heading)
         self._stepped = True
 
-        observation = self._get_obs()
         reward, reward_info = self._get_rew(speed, action)
         extra_reward, extra_info = self._legged_terms(action)
+        self._clock_steps += 1
+        observation = self._get_obs()  # what the next action is taken on: the clock's next phase
         reward = reward + extra_reward if extra_info else reward
         if self._positive_only:  # legged_gym's only_positive_rewards: costs never make an early fall pay
             reward = max(reward, 0.0)
@@ -654,6 +675,9 @@ class LocomotionEnv(AntEnv):
                     ((self._air_time - self._air_target) * touchdown).sum())
             if w["body_contact_cost_weight"]:
                 terms["reward_body_contact"] = -w["body_contact_cost_weight"] * body_contacts
+            if w["gait_clock_weight"]:  # the phase this step was taken in
+                meant = self._first_half if self._phase() < 0.5 else ~self._first_half
+                terms["reward_gait_clock"] = w["gait_clock_weight"] * float((feet == meant).mean())
             self._air_time = np.where(feet, 0.0, self._air_time + self._dt)
             self._prev_contact = feet
             self._prev_feet_xy = feet_xy.copy()
@@ -668,12 +692,15 @@ class LocomotionEnv(AntEnv):
             body = self.data.xpos[self._body_id]
             ahead = self._along(body) + self._sample_spacing * np.arange(self.height_samples)
             extras.append(self.terrain_height(ahead))
+        if self._period is not None:
+            angle = 2.0 * math.pi * self._phase()
+            extras.append(np.array([math.sin(angle), math.cos(angle)]))
         return np.concatenate([observation, *extras]) if extras else observation
 
     # -- what a resumed run needs beyond the simulator state -----------------------------------------
     def get_extra_state(self) -> dict:
         state = {"prev_action": self._prev_action.copy(), "air_time": self._air_time.copy(),
-                 "prev_contact": self._prev_contact.copy(), "stepped": self._stepped,
+                 "prev_contact": self._prev_contact.copy(), "stepped": self._stepped, "clock_steps": self._clock_steps,
                  "prev_feet_xy": None if self._prev_feet_xy is None else self._prev_feet_xy.copy(),
                  # mj_step leaves body positions from the start of its last physics step, and the next step's
                  # velocity starts from them (Ant-v5's way); a restored state must start from the same ones.
@@ -687,6 +714,7 @@ class LocomotionEnv(AntEnv):
         """After the simulator state is set (envs.set_env_state): the step, the curriculum, the episode's memory."""
         self._prev_action, self._air_time = state["prev_action"].copy(), state["air_time"].copy()
         self._prev_contact, self._stepped = state["prev_contact"].copy(), state["stepped"]
+        self._clock_steps = state.get("clock_steps", 0)
         self._prev_feet_xy = None if state["prev_feet_xy"] is None else state["prev_feet_xy"].copy()
         if self.has_step and "step_height" in state:
             self._place_step(state["step_height"], state["step_edge"] - self._start_along)
@@ -723,6 +751,8 @@ def locomotion_checks(loco) -> list:
             + [(speed_limit is None or speed_limit >= MIN_JOINT_SPEED_LIMIT,
                 f"env.locomotion.joint_speed_limit={speed_limit} must be >= {MIN_JOINT_SPEED_LIMIT} rad/s "
                 "(or null: as the model has it)")]
+            + [(loco.get("gait_period") is None or loco.get("gait_period") > 0,
+                f"env.locomotion.gait_period={loco.get('gait_period')} must be > 0 s (or null: no trot clock)")]
             + [non_negative(k) for k in ("kp", "kd", "armature", "feet_air_time_target", *weights)])
 
 

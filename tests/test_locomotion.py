@@ -369,6 +369,34 @@ def test_contacts_and_height_samples_extend_the_observation():
     assert seeing.unwrapped._contacts()[1] == 0  # and no non-foot body (the shanks carry the feet)
 
 
+def test_the_trot_clock_is_observed_pays_the_diagonal_schedule_and_travels_with_the_env_state():
+    clock = ("env.locomotion.gait_period=0.4", "env.locomotion.gait_clock_weight=0.5")
+    plain = env_of("env=quadruped").observation_space.shape[0]
+    env = env_of("env=quadruped", *clock)
+    assert env.observation_space.shape[0] == plain + 2
+    obs, _ = env.reset(seed=0)
+    assert obs[-2:].tolist() == [0.0, 1.0]  # sin, cos of phase 0
+    robot = env.unwrapped
+    lf_rh = np.array([c in ("LF", "RH") for c in robot.foot_corners])
+    for k in range(1, 31):  # 20 control steps of 0.02 s make one 0.4 s period
+        obs, _, _, _, info = env.step(np.zeros(12, np.float32))
+        angle = 2 * np.pi * ((k * 0.02 / 0.4) % 1.0)
+        np.testing.assert_allclose(obs[-2:], [np.sin(angle), np.cos(angle)], atol=1e-9)
+        feet, _ = robot._read_contacts()[1:]
+        meant = lf_rh if ((k - 1) * 0.02 / 0.4) % 1.0 < 0.5 else ~lf_rh  # the phase the step was taken in
+        assert info["reward_gait_clock"] == pytest.approx(0.5 * (feet == meant).mean())
+    saved = get_env_state(env)
+    fresh = env_of("env=quadruped", *clock)
+    fresh.reset(seed=3)
+    set_env_state(fresh, saved)
+    action = np.full(12, 0.1, np.float32)
+    first, second = env.step(action), fresh.step(action)
+    assert np.array_equal(first[0], second[0]) and first[1] == second[1]
+    with pytest.raises(Exception, match="four feet"):
+        env_of("env=mjcf", f"env.xml_file={GYM_ANT_XML}", "env.locomotion.gait_period=0.4",
+               "env.locomotion.foot_geoms=[left_ankle_geom]")
+
+
 def test_heading_auto_makes_a_minus_x_model_move_forward(tmp_path):
     path = tmp_path / "backwards.xml"
     path.write_text(FACING_MINUS_X)
@@ -445,6 +473,8 @@ def test_the_a1like_quadruped_faces_minus_x_stands_and_gets_a_tracking_camera():
     (["env.locomotion.torque_cost_weight=-1"], "torque_cost_weight=-1.0 must be >= 0"),
     (["env.locomotion.joint_speed_limit=null", "env.locomotion.joint_speed_limit_cost_weight=1"],
      "joint_speed_limit_cost_weight needs env.locomotion.joint_speed_limit"),
+    (["env.locomotion.gait_period=0"], "gait_period=0.0 must be > 0 s"),
+    (["env.locomotion.gait_clock_weight=0.5"], "gait_clock_weight needs env.locomotion.gait_period"),
 ])
 def test_bad_terrain_and_locomotion_values_are_one_error_line(args, expected, capsys, tmp_path):
     code, lines = refused(["env=quadruped_step", *args, f"hydra.run.dir={tmp_path / 'new'}"], capsys)
