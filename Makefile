@@ -20,8 +20,9 @@ train: $(STAMP)
 	MUJOCO_GL=egl $(PY) -m ppo_torchrl env=Hopper-v4 $(ARGS)
 
 # pytest exits 5 when it collects nothing; that is a failure here, never a silent pass.
+# -n 2: two test processes (pytest-xdist), one per core of the 2-core CI machine.
 test: $(STAMP)
-	$(PY) -m pytest -q $(ARGS)
+	$(PY) -m pytest -q -n 2 $(ARGS)
 
 bench: $(STAMP)
 	$(PY) -m pip install --quiet -e ".[bench]"
