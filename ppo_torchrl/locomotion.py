@@ -123,6 +123,7 @@ class GaitMeter:
         self.time = 0.0
         self.contact_time = np.zeros(self.n_feet)
         self.air_time = np.zeros(self.n_feet)
+        self.longest_air = np.zeros(self.n_feet)
         self.touchdowns = np.zeros(self.n_feet, np.int64)
         self.previous = None
         self.peak_joint_speed = 0.0
@@ -135,6 +136,7 @@ class GaitMeter:
         if self.previous is not None:
             self.touchdowns += feet & ~self.previous & (self.air_time >= MIN_AIR_S)
         self.air_time = np.where(feet, 0.0, self.air_time + dt)
+        self.longest_air = np.maximum(self.longest_air, self.air_time)
         self.previous = feet
         self.time += dt
         self.contact_time += dt * feet
@@ -154,6 +156,7 @@ class GaitMeter:
             "duty_factor": float(self.contact_time.mean() / t) if self.n_feet else 0.0,  # share of time a foot is down
             "foot_contact_share": (self.contact_time / t).tolist(),  # each foot's share of time on the ground
             "touchdown_frequency": (self.touchdowns / t).tolist(),  # each foot's touchdowns per second (Hz)
+            "longest_air_s": self.longest_air.tolist(),  # each foot's longest time off the ground (s)
             # each kind of pair (its two pairs pooled): the time both feet of a pair are down, and one or both
             "pair_together_time_s": {k: float(self.pair_together_time[2 * i:2 * i + 2].sum())
                                      for i, k in enumerate(self.pair_kinds)},
@@ -353,6 +356,14 @@ class LocomotionEnv(AntEnv):
 
     def _phase(self) -> float:
         return (self._clock_steps * self._dt / self._period) % 1.0
+
+    def clock_phase(self) -> Optional[float]:
+        """The trot clock's phase in [0, 1) for the next step (None without a clock)."""
+        return None if self._period is None else self._phase()
+
+    def feet_on_ground(self) -> np.ndarray:
+        """A ground-contact flag per foot (in `foot_names` order), as the simulator stands now."""
+        return self._contacts()[0]
 
     def _set_up_contact_termination(self, names) -> None:
         model = self.model

@@ -590,6 +590,8 @@ def test_per_foot_gait_figures_tell_a_trot_a_pace_a_bound_and_a_limp_apart():
             k: 1.0 if k == together else 0.0 for k in ("diagonal", "same_side", "same_end")}
     limp = gait_of("3-")  # RH never lands: a mean over feet (the duty factor) cannot see it, the per-foot share can
     assert limp["foot_contact_share"] == pytest.approx([0.5, 0.5, 0.5, 0.0]) and limp["touchdown_frequency"][3] == 0
+    assert trot["longest_air_s"] == pytest.approx([0.15] * 4)  # up for three of the four 0.05 s phases
+    assert limp["longest_air_s"] == pytest.approx([0.05, 0.05, 0.05, 2.0])  # RH up the whole 2 s
     assert limp["duty_factor"] == pytest.approx(0.375)
     # the figures follow the model's foot order, whatever it is
     assert gait_of("a-b-", corners=("RH", "LH", "RF", "LF"))["diagonal_pairs_together"] == 1.0
