@@ -230,10 +230,11 @@ def main(argv: List[str]) -> List[Path]:
         raise ConfigError(f"cannot write the report into {target}: {why}; copy the dir somewhere writable and run it there")
     if (target / "metrics.csv").is_file():
         outputs = [plot_run(target)]
-    elif (target / "multirun.yaml").is_file() or any(target.glob("*/.hydra")):
-        outputs = plot_sweep(target)
+    elif (target / "multirun.yaml").is_file() or any(target.glob("*/.hydra")) or (target / "trial.json").is_file():
+        outputs = plot_sweep(target)  # a trial_seeds run is a sweep of its seed<k>/ runs
     else:
-        raise ConfigError(f"{target} is neither a run dir (metrics.csv) nor a sweep dir (multirun.yaml)")
+        raise ConfigError(f"{target} is neither a run dir (metrics.csv) nor a sweep dir (multirun.yaml) nor a "
+                          "trial_seeds run (trial.json)")
     for out in outputs:
         print(f"wrote {out}")
     if is_run(target):

@@ -81,6 +81,8 @@ def test_a_multi_seed_study_trains_each_tuning_seed_and_maximizes_their_mean(tmp
     value = optuna.load_study(study_name=study.study_name, storage=storage).trials[0].value
     assert value == pytest.approx(sum(record["objective"]) / 2) == record["mean"]
     assert "sweep: 2 of 2 runs finished" in result.stderr
+    png, md, _ = report.main([str(trial.parent)])  # the trial's curve: its seeds as one group
+    assert png.read_bytes()[:4] == b"\x89PNG" and "| 6 7 |" in md.read_text()
 
 
 def test_optuna_study_name_holds_what_defines_the_search():
