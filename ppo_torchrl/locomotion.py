@@ -354,12 +354,9 @@ class LocomotionEnv(AntEnv):
         first = set(FOOT_PAIRS["diagonal"][0])
         self._first_half = np.array([c in first for c in self.foot_corners])  # down in the first half: LF, RH
 
-    def _phase(self) -> float:
-        return (self._clock_steps * self._dt / self._period) % 1.0
-
     def clock_phase(self) -> Optional[float]:
         """The trot clock's phase in [0, 1) for the next step (None without a clock)."""
-        return None if self._period is None else self._phase()
+        return None if self._period is None else (self._clock_steps * self._dt / self._period) % 1.0
 
     def feet_on_ground(self) -> np.ndarray:
         """A ground-contact flag per foot (in `foot_names` order), as the simulator stands now."""
@@ -687,7 +684,7 @@ class LocomotionEnv(AntEnv):
             if w["body_contact_cost_weight"]:
                 terms["reward_body_contact"] = -w["body_contact_cost_weight"] * body_contacts
             if w["gait_clock_weight"]:  # the phase this step was taken in
-                meant = self._first_half if self._phase() < 0.5 else ~self._first_half
+                meant = self._first_half if self.clock_phase() < 0.5 else ~self._first_half
                 terms["reward_gait_clock"] = w["gait_clock_weight"] * float((feet == meant).mean())
             self._air_time = np.where(feet, 0.0, self._air_time + self._dt)
             self._prev_contact = feet
@@ -704,7 +701,7 @@ class LocomotionEnv(AntEnv):
             ahead = self._along(body) + self._sample_spacing * np.arange(self.height_samples)
             extras.append(self.terrain_height(ahead))
         if self._period is not None:
-            angle = 2.0 * math.pi * self._phase()
+            angle = 2.0 * math.pi * self.clock_phase()
             extras.append(np.array([math.sin(angle), math.cos(angle)]))
         return np.concatenate([observation, *extras]) if extras else observation
 
