@@ -81,7 +81,8 @@ def _run_job(cfg) -> float:
 
 def _run_seeds(cfg, run_dir: Path) -> float:
     """trial_seeds=[6,7,8]: train each seed in turn into run_dir/seed<k>/ (an ordinary run dir each) and
-    return the mean of their objectives; trial.json holds the per-seed figures as they come."""
+    return the mean of their objectives; trial.json holds the per-seed figures as they come. A seed below
+    trial_prune_below ends the trial there (trial.json: "pruned": true)."""
     import copy
     import statistics
 
@@ -92,7 +93,7 @@ def _run_seeds(cfg, run_dir: Path) -> float:
     seeds, values = list(cfg.trial_seeds), []
     for seed in seeds:
         seed_cfg = copy.deepcopy(cfg)
-        seed_cfg.seed, seed_cfg.trial_seeds = seed, []
+        seed_cfg.seed, seed_cfg.trial_seeds, seed_cfg.trial_prune_below = seed, [], None
         seed_dir = run_dir / f"seed{seed}"
         rundir.claim(seed_dir)
         try:
@@ -100,12 +101,16 @@ def _run_seeds(cfg, run_dir: Path) -> float:
         finally:
             rundir.rollback(seed_dir)
         mean = statistics.fmean(values)
+        pruned = cfg.trial_prune_below is not None and values[-1] < cfg.trial_prune_below and seed != seeds[-1]
         rundir.atomic_write_json(run_dir / "trial.json", {
             "seeds": seeds[:len(values)], "objective": values, "mean": mean,
-            "std": statistics.stdev(values) if len(values) > 1 else 0.0})
+            "std": statistics.stdev(values) if len(values) > 1 else 0.0, "pruned": pruned})
         rundir.record(run_dir)
-    print(f"trial: seeds {', '.join(map(str, seeds))}: {', '.join(f'{v:.1f}' for v in values)}; mean {mean:.1f}",
-          file=sys.stderr, flush=True)
+        if pruned:
+            break
+    note = f" (pruned: seed {seeds[len(values) - 1]} below {cfg.trial_prune_below:g})" if pruned else ""
+    print(f"trial: seeds {', '.join(map(str, seeds[:len(values)]))}: {', '.join(f'{v:.1f}' for v in values)}; "
+          f"mean {mean:.1f}{note}", file=sys.stderr, flush=True)
     return mean
 
 

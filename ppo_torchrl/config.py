@@ -314,6 +314,10 @@ class Config:
     # the run trains each seed in turn into <run dir>/seed<k>/ and returns the mean of their objectives,
     # written with the per-seed figures to <run dir>/trial.json. [] (the default): one run of `seed`.
     trial_seeds: List[int] = field(default_factory=list)
+    # With trial_seeds: stop the trial after a seed whose objective is below this (Optuna's ThresholdPruner
+    # `lower`, per seed); the seeds after it are not trained and the trial's value is the mean of those that
+    # were. For a study on a small budget: e.g. half the worst seed of the best trial so far. null: never.
+    trial_prune_below: Optional[float] = None
 
 
 def study_name(*parts) -> str:

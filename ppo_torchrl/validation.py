@@ -51,6 +51,8 @@ def validate_config(cfg):
          f"trial_seeds={list(cfg.trial_seeds)} must be distinct seeds in [0, 2^32), e.g. [6,7,8]"),
         (not (cfg.trial_seeds and cfg.resume), "resume= continues one seed's run: give it <run dir>/seed<k> "
                                                "and leave trial_seeds out"),
+        (cfg.trial_prune_below is None or cfg.trial_seeds,
+         f"trial_prune_below={cfg.trial_prune_below} stops a trial of several seeds: give trial_seeds=[6,7,8] too"),
         (c.num_envs >= 1, f"collector.num_envs={c.num_envs} must be >= 1"),
         (c.frames_per_batch >= 1, f"collector.frames_per_batch={c.frames_per_batch} must be >= 1"),
         (c.num_envs < 1 or c.frames_per_batch % c.num_envs == 0,

@@ -163,6 +163,7 @@ def test_a_float32_gymnasium_env_trains_evaluates_and_exports(tmp_path):
     (["hydra.run.dir=/tmp/${oops}"], "hydra.run.dir: Interpolation key 'oops' not found"),
     (["-m", "hparams_search=optuna", "hydra.sweeper.n_trials=-1"], "hydra.sweeper.n_trials=-1 must be >= 1"),
     (["trial_seeds=[6,6]"], "trial_seeds=[6, 6] must be distinct seeds"),
+    (["trial_prune_below=100"], "trial_prune_below=100.0 stops a trial of several seeds: give trial_seeds"),
 ])
 def test_bad_values_are_refused_before_anything_runs(tmp_path, capsys, args, expected):
     where = "hydra.sweep.dir" if "-m" in args else "hydra.run.dir"

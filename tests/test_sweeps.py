@@ -85,6 +85,17 @@ def test_a_multi_seed_study_trains_each_tuning_seed_and_maximizes_their_mean(tmp
     assert png.read_bytes()[:4] == b"\x89PNG" and "| 6 7 |" in md.read_text()
 
 
+def test_a_trial_stops_at_a_seed_below_trial_prune_below(tmp_path):
+    run = tmp_path / "trial"
+    result = run_cli("env=InvertedPendulum-v4", "trial_seeds=[6,7]", "trial_prune_below=1e9", *TINY,
+                     f"hydra.run.dir={run}")
+    assert result.returncode == 0, result.stderr[-2000:]
+    record = json.loads((run / "trial.json").read_text())
+    assert record["seeds"] == [6] and record["pruned"] and not (run / "seed7").exists()
+    assert record["mean"] == record["objective"][0] < 1e9
+    assert f"trial: seeds 6: {record['mean']:.1f}; mean {record['mean']:.1f} (pruned: seed 6 below 1e+09)" in result.stderr
+
+
 def test_optuna_study_name_holds_what_defines_the_search():
     def sweeper(*overrides):
         cfg = compose_config(["env=InvertedPendulum-v4", *overrides], return_hydra_config=True)
