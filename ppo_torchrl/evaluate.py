@@ -284,12 +284,12 @@ def summarize(cfg, episodes: dict) -> dict:
 # What an eval of a locomotion env adds: gait_figures' keys and the feet's names (also in summary.json and the
 # height sweep). Per foot, in the model's foot order (`feet`): foot_contact_share, the share of time on the ground,
 # touchdown_frequency (Hz) and longest_air_s, the longest time it was off the ground in any episode (a foot
-# held up for seconds shows here). <kind>_pairs_together: of the time a foot of a pair is down, the share both are, the
+# held up for seconds shows here); longest_air_moving_s counts only the time the robot moved (not a standstill). <kind>_pairs_together: of the time a foot of a pair is down, the share both are, the
 # two pairs of a kind pooled (locomotion.FOOT_PAIRS): diagonal LF+RH, RF+LH (a trot: near 1), same_side LF+LH,
 # RF+RH (a pace), same_end LF+RF, LH+RH (a bound); only for four feet, one at each corner.
 PAIR_KEYS = tuple(f"{kind}_pairs_together" for kind in FOOT_PAIRS)
 GAIT_KEYS = ("stride_frequency", "duty_factor", "peak_joint_speed", "over_speed_limit_share", "body_contact_share",
-             "feet", "foot_contact_share", "touchdown_frequency", "longest_air_s", *PAIR_KEYS)
+             "feet", "foot_contact_share", "touchdown_frequency", "longest_air_s", "longest_air_moving_s", *PAIR_KEYS)
 
 
 def gait_figures(gaits: list, speed_limit: Optional[float]) -> dict:
@@ -300,7 +300,8 @@ def gait_figures(gaits: list, speed_limit: Optional[float]) -> dict:
                for key in ("stride_frequency", "duty_factor", "body_contact_share")}
     for key in ("foot_contact_share", "touchdown_frequency"):
         figures[key] = np.mean([g[key] for g in gaits], axis=0).tolist() if gaits[0][key] else []
-    figures["longest_air_s"] = np.max([g["longest_air_s"] for g in gaits], axis=0).tolist() if gaits[0]["longest_air_s"] else []
+    for key in ("longest_air_s", "longest_air_moving_s"):
+        figures[key] = np.max([g[key] for g in gaits], axis=0).tolist() if gaits[0][key] else []
     for kind in gaits[0]["pair_together_time_s"]:
         down = sum(g["pair_down_time_s"][kind] for g in gaits)
         together = sum(g["pair_together_time_s"][kind] for g in gaits)
@@ -342,9 +343,10 @@ def motion_line(result: dict) -> str:
                  f"a non-foot body on the ground {result['body_contact_share']:.0%} of the time")
         if result["feet"]:
             feet = zip(result["feet"], result["foot_contact_share"], result["touchdown_frequency"],
-                       result["longest_air_s"])
-            line += "; per foot, share of time on the ground, touchdowns/s and longest time in the air (s): " + ", ".join(
-                f"{name} {share:.2f} {rate:.1f} {air:.2f}" for name, share, rate, air in feet)
+                       result["longest_air_s"], result["longest_air_moving_s"])
+            line += ("; per foot, share of time on the ground, touchdowns/s and longest time in the air (s; of it while "
+                     "moving): " + ", ".join(f"{name} {share:.2f} {rate:.1f} {air:.2f} ({moving:.2f})"
+                                             for name, share, rate, air, moving in feet))
         pairs = [(key[:-len("_pairs_together")].replace("_", " "), result[key]) for key in PAIR_KEYS
                  if result.get(key) is not None]
         if pairs:

@@ -38,7 +38,8 @@ configured (so a config without these keys steps exactly as Ant-v5 does):
   terrain heights at points ahead of the main body, computed from the known step geometry
   (the step's top where the point lies beyond its edge, else 0: the floor is at z = 0).
 - **Gait bookkeeping** for eval (`measure_gait = True`): stride frequency, duty factor, each foot's
-  share of time on the ground and touchdowns per second, for four feet at four corners (`foot_corners`)
+  share of time on the ground, touchdowns per second and longest time in the air (also counting only
+  the time the robot moved forward, its previous control step at 0.1 m/s or more), for four feet at four corners (`foot_corners`)
   the share of time both feet of a pair are down (diagonal, same side, same end: a trot, a pace, a
   bound), peak joint speed and the share of time a non-foot body touches the ground, sampled at every
   physics step. A non-foot body is a robot body that holds no foot geom: the trunk, a thigh; not the
@@ -65,6 +66,7 @@ LOCOMOTION_ID = "ppo_torchrl/Locomotion-v0"
 STEP_BODY = "step"  # terrain models: the static body that holds the step's box geom
 HEADINGS = {"x": 0.0, "-x": 180.0, "y": 90.0, "-y": 270.0}
 MIN_AIR_S = 0.02  # gait: a touchdown counts after at least this long in the air (contact chatter is not a stride)
+MOVING_SPEED = 0.1  # m/s, gait: the robot moves when its last control step went forward at least this fast
 CORNERS = ("LF", "RF", "LH", "RH")  # a four-footed robot's feet: left/right, fore/hind
 # gait: the foot pairs whose time down together tells the gaits apart (a trot, a pace, a bound)
 FOOT_PAIRS = {"diagonal": (("LF", "RH"), ("RF", "LH")), "same_side": (("LF", "LH"), ("RF", "RH")),
@@ -124,6 +126,8 @@ class GaitMeter:
         self.contact_time = np.zeros(self.n_feet)
         self.air_time = np.zeros(self.n_feet)
         self.longest_air = np.zeros(self.n_feet)
+        self.air_moving = np.zeros(self.n_feet)  # of this time in the air, the time the robot moved
+        self.longest_air_moving = np.zeros(self.n_feet)
         self.touchdowns = np.zeros(self.n_feet, np.int64)
         self.previous = None
         self.peak_joint_speed = 0.0
@@ -132,11 +136,13 @@ class GaitMeter:
         self.pair_together_time = np.zeros(len(self._first))  # both feet of the pair down
         self.pair_down_time = np.zeros(len(self._first))  # at least one of them down
 
-    def add(self, feet: np.ndarray, joint_speed: float, body_contact: bool, dt: float) -> None:
+    def add(self, feet: np.ndarray, joint_speed: float, body_contact: bool, dt: float, moving: bool = True) -> None:
         if self.previous is not None:
             self.touchdowns += feet & ~self.previous & (self.air_time >= MIN_AIR_S)
         self.air_time = np.where(feet, 0.0, self.air_time + dt)
         self.longest_air = np.maximum(self.longest_air, self.air_time)
+        self.air_moving = np.where(feet, 0.0, self.air_moving + dt * moving)
+        self.longest_air_moving = np.maximum(self.longest_air_moving, self.air_moving)
         self.previous = feet
         self.time += dt
         self.contact_time += dt * feet
@@ -157,6 +163,9 @@ class GaitMeter:
             "foot_contact_share": (self.contact_time / t).tolist(),  # each foot's share of time on the ground
             "touchdown_frequency": (self.touchdowns / t).tolist(),  # each foot's touchdowns per second (Hz)
             "longest_air_s": self.longest_air.tolist(),  # each foot's longest time off the ground (s)
+            # the same, counting only the time the robot moved (MOVING_SPEED): a foot held up at a standstill
+            # (hanging at the step's edge) does not count, a foot held up while walking does
+            "longest_air_moving_s": self.longest_air_moving.tolist(),
             # each kind of pair (its two pairs pooled): the time both feet of a pair are down, and one or both
             "pair_together_time_s": {k: float(self.pair_together_time[2 * i:2 * i + 2].sum())
                                      for i, k in enumerate(self.pair_kinds)},
@@ -175,6 +184,7 @@ class LocomotionEnv(AntEnv):
     # Within step, read once after the control step: the contacts (_read_contacts) and is_healthy.
     _now = None
     _healthy_now = None
+    _moving = False  # the last control step went forward at MOVING_SPEED or more (gait bookkeeping)
 
     def __init__(self, xml_file: str, legged: Optional[dict] = None, terrain: Optional[dict] = None,
                  evaluation: bool = False, **ant_kwargs):
@@ -475,7 +485,7 @@ class LocomotionEnv(AntEnv):
         self._prev_contact = np.zeros(len(self.feet), bool)
         self._prev_feet_xy = None
         self._clock_steps = 0  # control steps since the episode began: the trot clock's time
-        self._stepped = False
+        self._stepped = self._moving = False
         self.termination = None  # why the episode ended (step): 'contact: <body>', 'fall', ...; None while it runs
         self.gait.reset()
 
@@ -582,7 +592,8 @@ class LocomotionEnv(AntEnv):
             np.maximum(peak, speeds, out=peak)
             if self.measure_gait:
                 feet, body = self._contacts()
-                self.gait.add(feet, float(speeds.max()) if len(speeds) else 0.0, body > 0, model.opt.timestep)
+                self.gait.add(feet, float(speeds.max()) if len(speeds) else 0.0, body > 0, model.opt.timestep,
+                              self._moving)
         self._step_peak = peak
         mujoco.mj_rnePostConstraint(model, data)
 
@@ -622,7 +633,7 @@ class LocomotionEnv(AntEnv):
         xy_velocity = (xy_after - xy_before) / self._dt
         x_velocity, y_velocity = xy_velocity
         speed = x_velocity if self._heading_is_x else float(xy_velocity @ self.heading)
-        self._stepped = True
+        self._stepped, self._moving = True, speed >= MOVING_SPEED
 
         reward, reward_info = self._get_rew(speed, action)
         extra_reward, extra_info = self._legged_terms(action)

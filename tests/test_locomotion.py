@@ -522,6 +522,7 @@ def test_evaluate_at_a_step_height_reports_gait_figures(step_run, capsys):
     printed = capsys.readouterr().out
     assert f"{saved['success_rate']:.0%} of episodes cross the line" in printed and "are not terminated" in printed
     assert f"LF_foot {saved['foot_contact_share'][0]:.2f}" in printed
+    assert all(0 <= moving <= air for moving, air in zip(saved["longest_air_moving_s"], saved["longest_air_s"]))
     assert 0.0 <= result["duty_factor"] <= 1.0 and result["peak_joint_speed"] <= result["joint_speed_limit"]
     assert result["over_speed_limit_share"] == 0.0  # never over the limit, as the peak says
 
@@ -598,6 +599,19 @@ def test_per_foot_gait_figures_tell_a_trot_a_pace_a_bound_and_a_limp_apart():
     from ppo_torchrl.locomotion import GaitMeter
 
     assert "diagonal_pairs_together" not in evaluate.gait_figures([GaitMeter(3).summary()], None)  # no corners
+
+
+def test_a_foot_held_up_at_a_standstill_is_not_counted_as_in_the_air_while_moving():
+    from ppo_torchrl.locomotion import GaitMeter
+
+    meter, up, down = GaitMeter(1), np.array([False]), np.array([True])
+    for feet, moving, seconds in ((up, True, 0.3), (up, False, 1.0), (up, True, 0.3), (down, True, 0.1),
+                                  (up, True, 0.2), (down, False, 0.1)):
+        for _ in range(round(seconds / 0.005)):
+            meter.add(feet, 0.0, False, 0.005, moving)
+    gait = meter.summary()
+    assert gait["longest_air_s"] == pytest.approx([1.6])  # the whole spell, standstill included
+    assert gait["longest_air_moving_s"] == pytest.approx([0.6])  # the same spell's moving part: 0.3 + 0.3
 
 
 def test_each_foot_is_placed_at_its_corner_along_the_heading(tmp_path):
