@@ -284,9 +284,10 @@ def summarize(cfg, episodes: dict) -> dict:
 # What an eval of a locomotion env adds: gait_figures' keys and the feet's names (also in summary.json and the
 # height sweep). Per foot, in the model's foot order (`feet`): foot_contact_share, the share of time on the ground,
 # touchdown_frequency (Hz) and longest_air_s, the longest time it was off the ground in any episode (a foot
-# held up for seconds shows here); longest_air_moving_s counts only the time the robot moved (not a standstill). <kind>_pairs_together: of the time a foot of a pair is down, the share both are, the
-# two pairs of a kind pooled (locomotion.FOOT_PAIRS): diagonal LF+RH, RF+LH (a trot: near 1), same_side LF+LH,
-# RF+RH (a pace), same_end LF+RF, LH+RH (a bound); only for four feet, one at each corner.
+# held up for seconds shows here); longest_air_moving_s counts only the time the robot moved (not a standstill).
+# <kind>_pairs_together: of the time a foot of a pair is down, the share both are, the two pairs of a kind pooled
+# (locomotion.FOOT_PAIRS): diagonal LF+RH, RF+LH (a trot: near 1), same_side LF+LH, RF+RH (a pace), same_end
+# LF+RF, LH+RH (a bound); only for four feet, one at each corner.
 PAIR_KEYS = tuple(f"{kind}_pairs_together" for kind in FOOT_PAIRS)
 GAIT_KEYS = ("stride_frequency", "duty_factor", "peak_joint_speed", "over_speed_limit_share", "body_contact_share",
              "feet", "foot_contact_share", "touchdown_frequency", "longest_air_s", "longest_air_moving_s", *PAIR_KEYS)

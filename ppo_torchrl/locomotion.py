@@ -39,10 +39,10 @@ configured (so a config without these keys steps exactly as Ant-v5 does):
   (the step's top where the point lies beyond its edge, else 0: the floor is at z = 0).
 - **Gait bookkeeping** for eval (`measure_gait = True`): stride frequency, duty factor, each foot's
   share of time on the ground, touchdowns per second and longest time in the air (also counting only
-  the time the robot moved forward, its previous control step at 0.1 m/s or more), for four feet at four corners (`foot_corners`)
-  the share of time both feet of a pair are down (diagonal, same side, same end: a trot, a pace, a
-  bound), peak joint speed and the share of time a non-foot body touches the ground, sampled at every
-  physics step. A non-foot body is a robot body that holds no foot geom: the trunk, a thigh; not the
+  the time the robot moved forward, its previous control step at 0.1 m/s or more), for four feet at
+  four corners (`foot_corners`) the share of time both feet of a pair are down (diagonal, same side,
+  same end: a trot, a pace, a bound), peak joint speed and the share of time a non-foot body touches
+  the ground, sampled at every physics step. A non-foot body is a robot body that holds no foot geom: the trunk, a thigh; not the
   shank that carries the foot (its capsule ends inside the foot sphere and touches whenever the foot
   sinks a millimetre into the ground).
 - **Tracking camera**: a rendered model without a camera named `track` gets one on its main body.
