@@ -40,11 +40,10 @@ def main() -> None:
     robot = env.unwrapped
     if robot.clock_phase() is None:
         raise SystemExit("error: this run has no trot clock (env.locomotion.gait_period)")
-    first_half = np.array([c in ("LF", "RH") for c in robot.foot_corners])
     down, steps, match = np.zeros((BINS, len(robot.feet))), np.zeros(BINS), []
     obs, _ = env.reset(seed=args.seed)
     for _ in range(cfg.env.max_episode_steps or 1000):
-        phase = robot.clock_phase()
+        phase, meant = robot.clock_phase(), robot.feet_meant_down()
         x = torch.as_tensor(normalizer(obs[None], update=False), dtype=torch.float32)[0]
         with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
             action = ac.actor(TensorDict({"observation": x}, []))["action"]
@@ -53,7 +52,7 @@ def main() -> None:
         b = int(phase * BINS)
         down[b] += feet
         steps[b] += 1
-        match.append(float((feet == (first_half if phase < 0.5 else ~first_half)).mean()))
+        match.append(float((feet == meant).mean()))
         if terminated or truncated:
             break
     print(f"{args.run} ({args.checkpoint}), step {args.height:.2f} m, episode seed {args.seed}: {len(match)} steps, "

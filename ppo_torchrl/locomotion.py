@@ -42,9 +42,9 @@ configured (so a config without these keys steps exactly as Ant-v5 does):
   the time the robot moved forward, its previous control step at 0.1 m/s or more), for four feet at
   four corners (`foot_corners`) the share of time both feet of a pair are down (diagonal, same side,
   same end: a trot, a pace, a bound), peak joint speed and the share of time a non-foot body touches
-  the ground, sampled at every physics step. A non-foot body is a robot body that holds no foot geom: the trunk, a thigh; not the
-  shank that carries the foot (its capsule ends inside the foot sphere and touches whenever the foot
-  sinks a millimetre into the ground).
+  the ground, sampled at every physics step. A non-foot body is a robot body that holds no foot geom:
+  the trunk, a thigh; not the shank that carries the foot (its capsule ends inside the foot sphere and
+  touches whenever the foot sinks a millimetre into the ground).
 - **Tracking camera**: a rendered model without a camera named `track` gets one on its main body.
 """
 
@@ -367,6 +367,12 @@ class LocomotionEnv(AntEnv):
     def clock_phase(self) -> Optional[float]:
         """The trot clock's phase in [0, 1) for the next step (None without a clock)."""
         return None if self._period is None else (self._clock_steps * self._dt / self._period) % 1.0
+
+    def feet_meant_down(self) -> Optional[np.ndarray]:
+        """The trot clock's schedule for the next step: a flag per foot meant to be on the ground (LF and RH in the
+        first half of the period, RF and LH in the second); None without a clock."""
+        phase = self.clock_phase()
+        return None if phase is None else self._first_half if phase < 0.5 else ~self._first_half
 
     def feet_on_ground(self) -> np.ndarray:
         """A ground-contact flag per foot (in `foot_names` order), as the simulator stands now."""
@@ -695,7 +701,7 @@ class LocomotionEnv(AntEnv):
             if w["body_contact_cost_weight"]:
                 terms["reward_body_contact"] = -w["body_contact_cost_weight"] * body_contacts
             if w["gait_clock_weight"]:  # the phase this step was taken in
-                meant = self._first_half if self.clock_phase() < 0.5 else ~self._first_half
+                meant = self.feet_meant_down()
                 terms["reward_gait_clock"] = w["gait_clock_weight"] * float((feet == meant).mean())
             self._air_time = np.where(feet, 0.0, self._air_time + self._dt)
             self._prev_contact = feet
