@@ -275,7 +275,7 @@ def summarize(cfg, episodes: dict) -> dict:
     result["outcomes"] = [  # one per episode, in order
         {"seed": seed, "length": n, "return": r, "terminated": stop, "termination": why,
          **({"crossed": bool(b), "success": bool(b and not stop)} if beyond is not None else {}),
-         **({"foot_contact_share": gaits[i]["foot_contact_share"]} if gaits else {})}
+         **({key: gaits[i][key] for key in EPISODE_FOOT_KEYS} if gaits else {})}
         for i, (seed, n, r, stop, why) in enumerate(zip(episodes["seeds"], lengths, returns, terminated, ends))
         for b in [beyond[i] if beyond is not None else None]]
     return result
@@ -289,6 +289,9 @@ def summarize(cfg, episodes: dict) -> dict:
 # (locomotion.FOOT_PAIRS): diagonal LF+RH, RF+LH (a trot: near 1), same_side LF+LH, RF+RH (a pace), same_end
 # LF+RF, LH+RH (a bound); only for four feet, one at each corner.
 PAIR_KEYS = tuple(f"{kind}_pairs_together" for kind in FOOT_PAIRS)
+# Per foot in each episode's outcome (eval.json) and row (height_sweep_episodes.csv): a worst case over the eval
+# (longest_air_moving_s) shows whether one episode or every one holds a foot up.
+EPISODE_FOOT_KEYS = ("foot_contact_share", "touchdown_frequency", "longest_air_moving_s")
 GAIT_KEYS = ("stride_frequency", "duty_factor", "peak_joint_speed", "over_speed_limit_share", "body_contact_share",
              "feet", "foot_contact_share", "touchdown_frequency", "longest_air_s", "longest_air_moving_s", *PAIR_KEYS)
 
@@ -427,8 +430,8 @@ def sweep_row(height: float, episodes: int, result: dict) -> dict:
 
 def height_sweep(cfg, ac, obs_stats, heights: list[float], episodes: int, seed: int, out_dir: Path, title: str) -> list:
     """Evaluate at each fixed step height; write height_sweep.csv (a row per height), the success-rate curve
-    height_sweep.png, height_sweep_episodes.csv (a row per episode: crossed, terminated and why, length) and
-    height_sweep.json (each height's eval result, eval.json's figures)."""
+    height_sweep.png, height_sweep_episodes.csv (a row per episode: crossed, terminated and why, length and
+    EPISODE_FOOT_KEYS per foot) and height_sweep.json (each height's eval result, eval.json's figures)."""
     import csv
 
     from ppo_torchrl.rundir import atomic_write_json
@@ -443,10 +446,10 @@ def height_sweep(cfg, ac, obs_stats, heights: list[float], episodes: int, seed: 
         rows.append(sweep_row(height, episodes, result))
         results.append({"step_height_m": height, **result})
         for outcome in result["outcomes"]:
-            shares = outcome.get("foot_contact_share", [])
             per_episode.append({"step_height_m": height,
-                                **{k: v for k, v in outcome.items() if k != "foot_contact_share"},
-                                **{f"foot_contact_share {foot}": v for foot, v in zip(result["feet"], shares)}})
+                                **{k: v for k, v in outcome.items() if k not in EPISODE_FOOT_KEYS},
+                                **{f"{key} {foot}": v for key in EPISODE_FOOT_KEYS
+                                   for foot, v in zip(result["feet"], outcome.get(key, []))}})
         feet = ", ".join(f"{foot} {share:.2f}" for foot, share in zip(result["feet"], result["foot_contact_share"]))
         print(f"step {height * 100:g} cm: {result['success_rate']:.0%} of {episodes} episodes cross and are not "
               f"terminated ({result['crossed_at_end_rate']:.0%} beyond the line at the end; {ended_line(result)}); "

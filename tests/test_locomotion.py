@@ -519,6 +519,7 @@ def test_evaluate_at_a_step_height_reports_gait_figures(step_run, capsys):
     outcomes = saved["outcomes"]  # one record per episode
     assert [o["seed"] for o in outcomes] == [0, 1] and [o["length"] for o in outcomes] == saved["lengths"]
     assert saved["success_rate"] == np.mean([o["crossed"] and not o["terminated"] for o in outcomes])
+    assert all(len(o[key]) == 4 for o in outcomes for key in evaluate.EPISODE_FOOT_KEYS)  # per foot, per episode
     printed = capsys.readouterr().out
     assert f"{saved['success_rate']:.0%} of episodes cross the line" in printed and "are not terminated" in printed
     assert f"LF_foot {saved['foot_contact_share'][0]:.2f}" in printed
@@ -640,6 +641,11 @@ def test_height_sweep_writes_a_csv_and_a_success_curve(step_run, tmp_path):
         mine = [e for e in episodes if e["step_height_m"] == row["step_height_m"]]
         assert float(row["success_rate"]) == np.mean([e["success"] == "True" for e in mine])
         assert float(row["terminated_share"]) == np.mean([e["terminated"] == "True" for e in mine])
+        for foot in ("LF_foot", "RH_foot"):  # the height's worst case is one episode's, its mean the episodes'
+            assert float(row[f"longest_air_moving_s {foot}"]) == max(
+                float(e[f"longest_air_moving_s {foot}"]) for e in mine)
+            assert float(row[f"touchdown_frequency {foot}"]) == pytest.approx(
+                np.mean([float(e[f"touchdown_frequency {foot}"]) for e in mine]))
     saved = json.loads((tmp_path / "height_sweep.json").read_text())
     assert [h["step_height_m"] for h in saved["heights"]] == [0.0, 0.1, 0.2] and saved["seed"] == 0
     assert (tmp_path / "height_sweep.png").read_bytes()[:4] == b"\x89PNG"
