@@ -213,8 +213,11 @@ def hydra_value(cfg, key: str):
         raise ConfigError(f"{key}: {str(exc).splitlines()[0]}; fix the value given to {key}") from None
 
 
-def sweep_jobs(overrides: list[str]) -> list[list[str]]:
-    """The override lists of a sweep's jobs (discrete sweeps expanded; an interval is left to the sweeper)."""
+def sweep_jobs(overrides: list[str], covering: bool = False) -> list[list[str]]:
+    """The override lists of a sweep's jobs (discrete sweeps expanded; an interval is left to the sweeper).
+    covering: each value of each discrete sweep once, the others at their first value (the first job first) -- what
+    to check of a space a sampler draws from (Optuna): its product can be a thousand configs, a minute to compose
+    each hundred, and the sampler runs only some of them."""
     from hydra.core.override_parser.overrides_parser import OverridesParser
     from hydra.errors import HydraException
 
@@ -231,6 +234,9 @@ def sweep_jobs(overrides: list[str]) -> list[list[str]]:
         elif override.is_discrete_sweep():
             key = override.get_key_element()
             axes.append([f"{key}={value}" for value in override.sweep_string_iterator()])
+    if covering:
+        first = [axis[0] for axis in axes]
+        return [first] + [first[:i] + [value] + first[i + 1:] for i, axis in enumerate(axes) for value in axis[1:]]
     return [list(job) for job in itertools.product(*axes)]
 
 
@@ -320,14 +326,13 @@ def job_dirs(overrides: list[str], basic: bool) -> list[str]:
     return [f"{EXCLUDE_KEYS}=[{','.join(fixed)}]"]
 
 
-def dry_run(flags: list[str], overrides: list[str]) -> list[str]:
+def dry_run(flags: list[str], overrides: list[str], cfg) -> list[str]:
     """`-m ... --cfg job|hydra|all` (or `--info`), which Hydra refuses ("Only one of --run, --multirun,
     --cfg, --info ..."): print the launcher and the jobs, and return the arguments that make Hydra
-    show job #0 as the multirun would compose it."""
+    show job #0 as the multirun would compose it (cfg: job #0's config with its hydra node)."""
     from hydra.core.override_parser.overrides_parser import OverridesParser
 
     jobs = sweep_jobs(overrides)
-    cfg = compose(jobs[0] + hydra_overrides(overrides), with_hydra=True)
     sweeper = cfg.hydra.sweeper._target_
     basic = sweeper.endswith(".BasicSweeper")
     parsed = OverridesParser.create().parse_overrides(overrides)
@@ -388,10 +393,14 @@ def prepare(argv: list[str]) -> list[str]:
     check_env_override(overrides)
     multirun = "-m" in flags or "--multirun" in flags
     jobs = sweep_jobs(overrides) if multirun else [overrides]
+    hydra_cfg = compose(jobs[0] + hydra_overrides(overrides), with_hydra=True) if multirun else None
+    basic = multirun and hydra_cfg.hydra.sweeper._target_.endswith(".BasicSweeper")
+    if multirun and not basic:  # a sampler's space: every value checked, not every combination
+        jobs = sweep_jobs(overrides, covering=True)
     if any(f in INFO_FLAGS for f in flags):  # print or inspect: check the config, write nothing
         for job in jobs:
             compose(job)
-        shown = dry_run(flags, overrides) if multirun else argv
+        shown = dry_run(flags, overrides, hydra_cfg) if multirun else argv
         cfg_type = next((flags[i + 1] for i, f in enumerate(flags[:-1]) if f in ("--cfg", "-c")), None)
         if cfg_type == "job" and not {"--package", "-p", "--info", "-i"} & set(flags):
             show_job(jobs[0], resolve="--resolve" in flags)
@@ -403,7 +412,7 @@ def prepare(argv: list[str]) -> list[str]:
         return with_override(argv, "hydra.run.dir", run_dir) + ["hydra.output_subdir=null"]
     for job in jobs:  # every job, before the first one runs (the env is built once per env config)
         validate_config(compose(job))
-    hydra_cfg = compose(jobs[0] + hydra_overrides(overrides) if multirun else overrides, with_hydra=True)
+    hydra_cfg = hydra_cfg or compose(overrides, with_hydra=True)
     overwrite = bool(hydra_cfg.get("overwrite", False))
     if multirun:
         if any(o.startswith("hparams_search=") for o in overrides):
@@ -411,7 +420,6 @@ def prepare(argv: list[str]) -> list[str]:
         sweep_dir = Path(hydra_value(hydra_cfg, "hydra.sweep.dir"))
         rundir.claim(sweep_dir, overwrite=overwrite, what="sweep")
         SWEEP["dir"] = sweep_dir
-        basic = hydra_cfg.hydra.sweeper._target_.endswith(".BasicSweeper")
         return with_override(argv, "hydra.sweep.dir", sweep_dir) + job_dirs(overrides, basic)
     run_dir = Path(hydra_value(hydra_cfg, "hydra.run.dir"))
     rundir.claim(run_dir, overwrite=overwrite)

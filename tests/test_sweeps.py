@@ -193,3 +193,26 @@ def test_a_stored_study_with_another_space_is_refused_and_stale_trials_are_faile
         check_stored_study(study, {"optim.lr": "tag(log, interval(1e-4, 1e-2))"})
     assert check_stored_study(study, {"optim.lr": "tag(log, interval(1e-5, 3e-3))"}).startswith(" (1 left running")
     assert [t.state for t in study.trials] == [optuna.trial.TrialState.FAIL]
+
+
+def test_a_search_space_is_checked_value_by_value_and_a_grid_job_by_job(tmp_path, monkeypatch):
+    from ppo_torchrl import __main__ as cli
+    from ppo_torchrl.errors import ConfigError
+
+    composed = []
+    compose = cli.compose
+    monkeypatch.setattr(cli, "compose", lambda job, **kw: composed.append(job) or compose(job, **kw))
+    space = ["optim.lr=choice(1e-4,2e-4,3e-4)", "loss.epochs=choice(1,2,3)", "policy.width=choice(16,32,64)"]
+    with pytest.raises(SystemExit):
+        cli.prepare(["-m", "hparams_search=optuna", "env=InvertedPendulum-v4", *space, "--cfg", "job"])
+    checked = [job for job in composed if any(o.startswith("optim.lr=") for o in job)]
+    values = {o for job in checked for o in job if o.startswith(("optim.lr=", "loss.epochs=", "policy.width="))}
+    assert len(values) == 9 and len(checked) < 12  # every value, not the 27 combinations a sampler draws from
+    composed.clear()
+    with pytest.raises(SystemExit):
+        cli.prepare(["-m", "env=InvertedPendulum-v4", *space, "--cfg", "job"])  # a grid runs them all
+    assert len({tuple(job) for job in composed if any(o.startswith("optim.lr=") for o in job)}) == 27
+    with pytest.raises(ConfigError, match="loss.minibatch_size=3000"):  # a bad value in the space's tail
+        cli.prepare(["-m", "hparams_search=optuna", "env=InvertedPendulum-v4", *space,
+                     "loss.minibatch_size=choice(64,3000)", f"hydra.sweep.dir={tmp_path / 'sweep'}"])
+    assert not (tmp_path / "sweep").exists()
