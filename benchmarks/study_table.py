@@ -20,8 +20,8 @@ def rows(study_dir: Path) -> list:
         overrides = yaml.safe_load((trial.parent / ".hydra" / "overrides.yaml").read_text())
         searched = [o for o in overrides if not o.startswith(("hparams_search=", "env=", "trial_prune_below="))]
         found.append({"dir": trial.parent, "sweep": trial.parent.parent.name, "trial": trial.parent.name,
-                      "overrides": searched, "seeds": record["seeds"], "objective": record["objective"], "mean": record["mean"],
-                      "std": record["std"], "pruned": record.get("pruned", False)})
+                      "overrides": searched, "seeds": record["seeds"], "objective": record["objective"],
+                      "mean": record["mean"], "std": record["std"], "pruned": record.get("pruned", False)})
     return sorted(found, key=lambda r: -r["mean"])
 
 
@@ -56,7 +56,8 @@ def plot(found: list, expected_seeds: int, png: Path) -> None:
         grid = np.asarray(min((c["frames"] for c in curves), key=len))
         mean = np.mean([np.interp(grid, c["frames"], np.nan_to_num(c["train/return_last100"])) for c in curves], 0)
         seeds = "" if len(curves) == expected_seeds else f", {len(curves)} seed{'s' if len(curves) > 1 else ''}"
-        ax.plot(grid, mean, lw=2.5 if i == 1 else 1.2, label=f"#{i} {r['sweep']} / {r['trial']}: {r['mean']:.0f}{seeds}")
+        label = f"#{i} {r['sweep']} / {r['trial']}: {r['mean']:.0f}{seeds}"
+        ax.plot(grid, mean, lw=2.5 if i == 1 else 1.2, label=label)
     ax.set(xlabel="frames", ylabel="train return (last 100 episodes), mean over the trial's seeds",
            title=f"{found[0]['dir'].parent.parent.name}: every trial, ranked as in the table")
     ax.grid(alpha=0.3)

@@ -412,7 +412,8 @@ def prepare(argv: list[str]) -> list[str]:
         return with_override(argv, "hydra.run.dir", run_dir) + ["hydra.output_subdir=null"]
     for job in jobs:  # every job, before the first one runs (the env is built once per env config)
         validate_config(compose(job))
-    hydra_cfg = hydra_cfg or compose(overrides, with_hydra=True)
+    if hydra_cfg is None:  # a single run's (a resume has returned above: it keeps its run's own config)
+        hydra_cfg = compose(overrides, with_hydra=True)
     overwrite = bool(hydra_cfg.get("overwrite", False))
     if multirun:
         if any(o.startswith("hparams_search=") for o in overrides):

@@ -348,8 +348,8 @@ def motion_line(result: dict) -> str:
         if result["feet"]:
             feet = zip(result["feet"], result["foot_contact_share"], result["touchdown_frequency"],
                        result["longest_air_s"], result["longest_air_moving_s"])
-            line += ("; per foot, share of time on the ground, touchdowns/s and longest time in the air (s; of it while "
-                     "moving): " + ", ".join(f"{name} {share:.2f} {rate:.1f} {air:.2f} ({moving:.2f})"
+            line += ("; per foot, share of time on the ground, touchdowns/s and longest time in the air (s; of it "
+                     "while moving): " + ", ".join(f"{name} {share:.2f} {rate:.1f} {air:.2f} ({moving:.2f})"
                                              for name, share, rate, air, moving in feet))
         pairs = [(key[:-len("_pairs_together")].replace("_", " "), result[key]) for key in PAIR_KEYS
                  if result.get(key) is not None]
