@@ -244,8 +244,9 @@ def hydra_overrides(overrides: list[str]) -> list[str]:
     return [o for o in overrides if o.lstrip("+~").startswith(("hydra.", "hydra/"))]
 
 
-def announce_study(hydra_cfg) -> None:
-    """`-m hparams_search=...`: say, before it starts, whether the Optuna study is new or resumed."""
+def announce_study(hydra_cfg, overrides: list[str]) -> None:
+    """`-m hparams_search=...`: say, before it starts, whether the Optuna study is new or resumed. The space
+    it searches is the sweeper's params with the command's own overrides over them, as the sweeper reads it."""
     import optuna
 
     sweeper = hydra_cfg.hydra.sweeper
@@ -257,22 +258,21 @@ def announce_study(hydra_cfg) -> None:
     trials = {study.study_name: study.n_trials for study in optuna.get_all_study_summaries(storage)}
     state = f"resuming study {name} with {trials[name]} trials" if name in trials else f"new study {name}"
     if name in trials:
-        state += check_stored_study(optuna.load_study(study_name=name, storage=storage), sweeper.params or {})
+        space = [f"{key}={value}" for key, value in (sweeper.params or {}).items()]
+        space += [o for o in overrides if o not in hydra_overrides(overrides)]
+        state += check_stored_study(optuna.load_study(study_name=name, storage=storage), space)
     print(f"optuna: {state} in {storage}", file=sys.stderr, flush=True)
 
 
-def check_stored_study(study, params) -> str:
-    """A stored study must search the space the command gives (Optuna would fail in the first trial and leave
-    it RUNNING); trials an interrupted sweep left RUNNING are marked failed. Returns what it did, for the line."""
+def check_stored_study(study, space: list[str]) -> str:
+    """A stored study must search the space the command gives (`key=choice(...)` overrides, the last of a key
+    wins; Optuna would fail in the first trial and leave it RUNNING); trials an interrupted sweep left RUNNING
+    are marked failed. Returns what it did, for the line."""
     import optuna
 
-    from hydra.core.override_parser.overrides_parser import OverridesParser
-    from hydra_plugins.hydra_optuna_sweeper._impl import create_optuna_distribution_from_override
+    from hydra_plugins.hydra_optuna_sweeper._impl import create_params_from_overrides
 
-    wanted = {}
-    for key, value in params.items():
-        override = OverridesParser.create().parse_override(f"{key}={value}")
-        wanted[key] = create_optuna_distribution_from_override(override)
+    wanted, _ = create_params_from_overrides(space)
     trials = study.get_trials(deepcopy=False)
     for trial in trials:
         for key, distribution in trial.distributions.items():
@@ -417,7 +417,7 @@ def prepare(argv: list[str]) -> list[str]:
     overwrite = bool(hydra_cfg.get("overwrite", False))
     if multirun:
         if any(o.startswith("hparams_search=") for o in overrides):
-            announce_study(hydra_cfg)
+            announce_study(hydra_cfg, overrides)
         sweep_dir = Path(hydra_value(hydra_cfg, "hydra.sweep.dir"))
         rundir.claim(sweep_dir, overwrite=overwrite, what="sweep")
         SWEEP["dir"] = sweep_dir

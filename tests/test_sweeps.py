@@ -45,7 +45,8 @@ def test_optuna_search_runs_trials_and_prints_the_best(tmp_path, capsys):
     storage = f"sqlite:///{tmp_path / 'study.db'}"
     args = ["hparams_search=optuna", "env=InvertedPendulum-v4", "hydra.sweeper.n_trials=2", *TINY,
             f"hydra.sweeper.storage={storage}"]
-    result = run_cli("-m", *args, f"hydra.sweep.dir={tmp_path / 'sweep'}")
+    space = ["optim.lr=choice(1e-4,3e-4)"]  # the command's own space, not the search file's interval
+    result = run_cli("-m", *args, *space, f"hydra.sweep.dir={tmp_path / 'sweep'}")
     assert result.returncode == 0, result.stderr[-2000:]
     name = "optuna_InvertedPendulum-v4_512frames"  # the search file, the env, the frame budget
     assert result.stderr.splitlines()[0] == f"optuna: new study {name} in {storage}"
@@ -58,8 +59,9 @@ def test_optuna_search_runs_trials_and_prints_the_best(tmp_path, capsys):
     assert len(study.trials) == 2  # stored: running the command again resumes this study, and says so
     from ppo_torchrl.__main__ import announce_study
 
-    announce_study(compose_config(args, return_hydra_config=True))
+    announce_study(compose_config(args, return_hydra_config=True), args + space)  # the same command: resumed
     assert capsys.readouterr().err == f"optuna: resuming study {name} with 2 trials in {storage}\n"
+    assert {t.params["optim.lr"] for t in study.trials} <= {1e-4, 3e-4}
 
 
 def test_a_multi_seed_study_trains_each_tuning_seed_and_maximizes_their_mean(tmp_path):
@@ -190,8 +192,12 @@ def test_a_stored_study_with_another_space_is_refused_and_stale_trials_are_faile
     study = optuna.create_study(direction="maximize")
     study.ask({"optim.lr": optuna.distributions.LogUniformDistribution(1e-5, 3e-3)})  # left RUNNING
     with pytest.raises(ConfigError, match="searched optim.lr over LogUniformDistribution"):
-        check_stored_study(study, {"optim.lr": "tag(log, interval(1e-4, 1e-2))"})
-    assert check_stored_study(study, {"optim.lr": "tag(log, interval(1e-5, 3e-3))"}).startswith(" (1 left running")
+        check_stored_study(study, ["optim.lr=tag(log, interval(1e-4, 1e-2))", "env=Hopper-v4"])
+    with pytest.raises(ConfigError, match="searched optim.lr over LogUniformDistribution"):  # the command's own wins
+        check_stored_study(study, ["optim.lr=tag(log, interval(1e-5, 3e-3))", "optim.lr=choice(1e-4,3e-4)"])
+    assert study.trials[0].state == optuna.trial.TrialState.RUNNING  # a refused command changed nothing
+    stored_then_command = ["optim.lr=choice(1e-4,3e-4)", "optim.lr=tag(log, interval(1e-5, 3e-3))", "env=Hopper-v4"]
+    assert check_stored_study(study, stored_then_command).startswith(" (1 left running")
     assert [t.state for t in study.trials] == [optuna.trial.TrialState.FAIL]
 
 
