@@ -10,6 +10,7 @@ import gymnasium
 import mujoco
 import numpy as np
 import pytest
+from omegaconf import OmegaConf
 
 from ppo_torchrl import evaluate
 from ppo_torchrl.envs import gym_make_kwargs, make_gym_env
@@ -319,6 +320,20 @@ def test_the_climb_preset_composes_to_the_recipe_and_builds_its_env():
     env.reset(seed=0)
     assert env.observation_space.shape[0] == blind.observation_space.shape[0] + 4 + 20  # 4 feet, 20 heights
     assert 1.0 <= env.unwrapped.step_edge <= 2.0
+
+
+def test_the_trot_recipe_is_the_clock_preset_then_its_flat_ground_fine_tune():
+    """The two stages of `make trot SEED=<k>` (issue 31's pre-registered recipe): the fine-tune is the trot preset
+    with flat ground, the clock's weight doubled and a lower lr, for 2M frames, and nothing else."""
+    trot = compose_config(["experiment=quadruped_trot"])
+    fine = compose_config(["experiment=quadruped_trot_finetune"])
+    assert (trot.env.locomotion.gait_period, trot.env.locomotion.gait_clock_weight, trot.collector.total_frames) == \
+        (0.6, 0.5, 10_000_000)
+    for key in ("env.locomotion.gait_clock_weight", "env.terrain.flat_share", "optim.lr", "collector.total_frames"):
+        OmegaConf.update(trot, key, OmegaConf.select(fine, key))
+    assert trot == fine
+    assert (fine.env.locomotion.gait_clock_weight, fine.env.terrain.flat_share, fine.optim.lr,
+            fine.collector.total_frames) == (1.0, 0.2, 3e-5, 2_000_000)
 
 
 def test_the_curriculum_and_the_step_travel_with_the_env_state():
