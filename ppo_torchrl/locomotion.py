@@ -286,6 +286,9 @@ class LocomotionEnv(AntEnv):
         actuated = [model.actuator_trnid[i, 0] for i in range(model.nu)
                     if model.actuator_trntype[i] == mujoco.mjtTrn.mjTRN_JOINT]
         self._act_dofs = np.array([model.jnt_dofadr[j] for j in actuated], dtype=np.int64)
+        first = int(self._act_dofs[0]) if len(actuated) else 0  # qvel[a:b], a view, where the dofs are a run
+        run = np.array_equal(self._act_dofs, np.arange(first, first + len(actuated)))
+        self._act_qvel = slice(first, first + len(actuated)) if run else self._act_dofs
         if any(v is not None for v in (limit, speed, kp, kd, armature)) and len(actuated) != model.nu:
             raise ConfigError("env.locomotion torque/speed limits and gains need every actuator to drive a joint "
                               "(transmission 'joint'); this model has other transmissions")
@@ -406,6 +409,7 @@ class LocomotionEnv(AntEnv):
         self.observe_contacts = bool(terrain.get("observe_contacts", False))
         self.height_samples = int(terrain.get("height_samples") or 0)
         self._sample_spacing = float(terrain.get("height_sample_spacing") or 0.1)
+        self._sample_offsets = self._sample_spacing * np.arange(self.height_samples)  # from main_body, along the heading
         self._step_id = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, STEP_BODY)
         asked = [k for k in TERRAIN_STEP_KEYS + ("eval_step_height",) if terrain.get(k) is not None]
         if terrain.get("curriculum"):
@@ -564,11 +568,11 @@ class LocomotionEnv(AntEnv):
     def _unhealthy(self) -> Optional[str]:
         """Why is_healthy is False: 'non-finite state', 'fall' (the root's z under healthy_z_range, above the
         terrain with healthy_z_above_terrain), 'too high' (over it); None while healthy."""
-        state = self.state_vector()
-        if not np.isfinite(state).all():
+        qpos = self.data.qpos  # Ant-v5's state_vector() is qpos and qvel, concatenated
+        if not (np.isfinite(qpos).all() and np.isfinite(self.data.qvel).all()):
             return "non-finite state"
         low, high = self._healthy_z_range
-        z = state[2] - self._ground_under_body() if self._z_above_terrain else state[2]
+        z = qpos[2] - self._ground_under_body() if self._z_above_terrain else qpos[2]
         return "fall" if z < low else "too high" if z > high else None
 
     def crossed(self) -> bool:
@@ -577,7 +581,9 @@ class LocomotionEnv(AntEnv):
 
     def _ground_under_body(self) -> float:
         """The terrain's height under main_body (m)."""
-        return float(self.terrain_height(np.array(self._along(self.data.xpos[self._body_id]))))
+        if not self.has_step:  # terrain_height for one point, without an array (once or twice a step)
+            return 0.0
+        return float(self.step_height) if self._along(self.data.xpos[self._body_id]) >= self.step_edge else 0.0
 
     def terrain_height(self, x: np.ndarray) -> np.ndarray:
         """Ground height at coordinate x along the heading (the step's top beyond its edge, else the floor at 0)."""
@@ -591,10 +597,10 @@ class LocomotionEnv(AntEnv):
             return super()._step_mujoco_simulation(ctrl, n_frames)
         model, data = self.model, self.data
         data.ctrl[:] = ctrl
-        peak = np.zeros(len(self._act_dofs))
+        peak, speeds = np.zeros(len(self._act_dofs)), np.empty(len(self._act_dofs))
         for _ in range(n_frames):  # joint speeds (and, in eval, the gait) sampled at every physics step
             mujoco.mj_step(model, data)
-            speeds = np.abs(data.qvel[self._act_dofs])
+            np.abs(data.qvel[self._act_qvel], out=speeds)
             np.maximum(peak, speeds, out=peak)
             if self.measure_gait:
                 feet, body = self._contacts()
@@ -653,8 +659,9 @@ class LocomotionEnv(AntEnv):
         self.termination = (f"contact: {contact}" if contact is not None else
                             self._unhealthy() if self._terminate_when_unhealthy and not self.is_healthy else None)
         terminated = self.termination is not None
+        xy = self.data.qpos[0:2]
         info = {"x_position": self.data.qpos[0], "y_position": self.data.qpos[1],
-                "distance_from_origin": np.linalg.norm(self.data.qpos[0:2], ord=2),
+                "distance_from_origin": np.sqrt(xy.dot(xy)),  # np.linalg.norm's own sum for a vector
                 "x_velocity": x_velocity, "y_velocity": y_velocity, "forward_velocity": speed,
                 "termination": self.termination,
                 **reward_info, **extra_info}
@@ -674,7 +681,7 @@ class LocomotionEnv(AntEnv):
         if w["torque_cost_weight"]:
             terms["reward_torque"] = -w["torque_cost_weight"] * float(np.square(data.actuator_force).sum())
         if w["joint_speed_cost_weight"]:
-            terms["reward_joint_speed"] = -w["joint_speed_cost_weight"] * float(np.square(data.qvel[self._act_dofs]).sum())
+            terms["reward_joint_speed"] = -w["joint_speed_cost_weight"] * float(np.square(data.qvel[self._act_qvel]).sum())
         if w["joint_speed_limit_cost_weight"]:
             excess = np.maximum(self._step_peak - self._speed_limit, 0.0)
             terms["reward_joint_speed_limit"] = -w["joint_speed_limit_cost_weight"] * float(excess.sum())
@@ -702,7 +709,7 @@ class LocomotionEnv(AntEnv):
                 terms["reward_body_contact"] = -w["body_contact_cost_weight"] * body_contacts
             if w["gait_clock_weight"]:  # the phase this step was taken in
                 meant = self.feet_meant_down()
-                terms["reward_gait_clock"] = w["gait_clock_weight"] * float((feet == meant).mean())
+                terms["reward_gait_clock"] = w["gait_clock_weight"] * float(np.count_nonzero(feet == meant) / len(feet))
             self._air_time = np.where(feet, 0.0, self._air_time + self._dt)
             self._prev_contact = feet
             self._prev_feet_xy = feet_xy.copy()
@@ -715,7 +722,7 @@ class LocomotionEnv(AntEnv):
             extras.append(self._contacts()[0].astype(np.float64))
         if self.height_samples:
             body = self.data.xpos[self._body_id]
-            ahead = self._along(body) + self._sample_spacing * np.arange(self.height_samples)
+            ahead = self._along(body) + self._sample_offsets
             extras.append(self.terrain_height(ahead))
         if self._period is not None:
             angle = 2.0 * math.pi * self.clock_phase()
