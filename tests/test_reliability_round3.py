@@ -249,12 +249,14 @@ def test_a_killed_collector_worker_is_one_line_and_a_failed_status(tmp_path):
     process = subprocess.Popen([sys.executable, "-m", "ppo_torchrl", *args], cwd=ROOT, stderr=subprocess.PIPE, text=True,
                                start_new_session=True)
     try:
-        deadline = time.time() + 120
-        while time.time() < deadline and not (run / "checkpoints" / "last.pt").exists():
+        deadline = time.time() + 300  # two workers' imports on a loaded 2-core machine: minutes, not seconds
+        while time.time() < deadline and not (run / "checkpoints" / "last.pt").exists() and process.poll() is None:
             time.sleep(0.2)
+        assert (run / "checkpoints" / "last.pt").exists(), f"no checkpoint in time: {process.poll()=}"
         children = subprocess.run(["ps", "-ww", "-o", "pid=,args=", "--ppid", str(process.pid)], capture_output=True,
                                   text=True).stdout.splitlines()
         workers = [int(line.split()[0]) for line in children if "resource_tracker" not in line]
+        assert len(workers) == 2, children  # the two collector workers, and nothing else to kill by mistake
         os.kill(workers[-1], signal.SIGKILL)
         _, err = process.communicate(timeout=120)
     finally:  # whatever failed above, the run and its workers do not outlive the test
