@@ -258,8 +258,9 @@ def announce_study(hydra_cfg, overrides: list[str]) -> None:
     trials = {study.study_name: study.n_trials for study in optuna.get_all_study_summaries(storage)}
     state = f"resuming study {name} with {trials[name]} trials" if name in trials else f"new study {name}"
     if name in trials:
+        hydra = set(hydra_overrides(overrides))
         space = [f"{key}={value}" for key, value in (sweeper.params or {}).items()]
-        space += [o for o in overrides if o not in hydra_overrides(overrides)]
+        space += [o for o in overrides if o not in hydra]
         state += check_stored_study(optuna.load_study(study_name=name, storage=storage), space)
     print(f"optuna: {state} in {storage}", file=sys.stderr, flush=True)
 

@@ -286,9 +286,9 @@ class LocomotionEnv(AntEnv):
         actuated = [model.actuator_trnid[i, 0] for i in range(model.nu)
                     if model.actuator_trntype[i] == mujoco.mjtTrn.mjTRN_JOINT]
         self._act_dofs = np.array([model.jnt_dofadr[j] for j in actuated], dtype=np.int64)
-        first = int(self._act_dofs[0]) if len(actuated) else 0  # qvel[a:b], a view, where the dofs are a run
-        run = np.array_equal(self._act_dofs, np.arange(first, first + len(actuated)))
-        self._act_qvel = slice(first, first + len(actuated)) if run else self._act_dofs
+        first = int(self._act_dofs[0]) if len(actuated) else 0  # qvel[a:b], a view, where the dofs are contiguous
+        contiguous = np.array_equal(self._act_dofs, np.arange(first, first + len(actuated)))
+        self._act_qvel = slice(first, first + len(actuated)) if contiguous else self._act_dofs
         if any(v is not None for v in (limit, speed, kp, kd, armature)) and len(actuated) != model.nu:
             raise ConfigError("env.locomotion torque/speed limits and gains need every actuator to drive a joint "
                               "(transmission 'joint'); this model has other transmissions")
