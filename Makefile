@@ -24,16 +24,18 @@ train: $(STAMP)
 test: $(STAMP)
 	$(PY) -m pytest -q -n 2 $(ARGS)
 
-# The quadruped's trot recipe (issue 31), one training seed in two stages: 10M frames of experiment=quadruped_trot,
-# then 2M of experiment=quadruped_trot_finetune from its last checkpoint (a run dir would give its best.pt, picked
-# by the in-training evals; the recipe was tuned from the last) (TROT_DIR/seed<k>_stage1, then TROT_DIR/seed<k>).
+# The quadruped's trot recipe (issue 31), one training seed in two stages: 10M frames of experiment=quadruped_trot
+# in TROT_DIR/seed<k>_stage1, then 2M of experiment=quadruped_trot_finetune in TROT_DIR/seed<k>, from the first
+# stage's last checkpoint, as the recipe was tuned (a run dir would give its best.pt, the in-training evals' pick).
 # A stage a kill stopped is resumed from its checkpoint; a finished one is kept. ARGS: more overrides for both
 # stages (e.g. ARGS="env=quadruped_a1like_step env.locomotion.healthy_z_range=[0.12,1.0]").   make trot SEED=11
 TROT_DIR ?= outputs/trot
+STAGE1 = $(TROT_DIR)/seed$(SEED)_stage1
 trot: $(STAMP)
 	@test -n "$(SEED)" || { echo "error: make trot needs SEED=<k> (the training seed)" >&2; exit 2; }
-	$(call stage,$(TROT_DIR)/seed$(SEED)_stage1,experiment=quadruped_trot seed=$(SEED) $(ARGS))
-	$(call stage,$(TROT_DIR)/seed$(SEED),experiment=quadruped_trot_finetune seed=$(SEED) init_from=$(TROT_DIR)/seed$(SEED)_stage1/checkpoints/last.pt $(ARGS))
+	$(call stage,$(STAGE1),experiment=quadruped_trot seed=$(SEED) $(ARGS))
+	$(call stage,$(TROT_DIR)/seed$(SEED),experiment=quadruped_trot_finetune seed=$(SEED) \
+		init_from=$(STAGE1)/checkpoints/last.pt $(ARGS))
 
 # stage(run dir, overrides): start the run there, resume it when a run there stopped, skip it when it finished.
 stage = if grep -qs '"status": "finished"' $(1)/summary.json; then echo "$(1): finished"; \
