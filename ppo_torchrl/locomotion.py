@@ -341,6 +341,8 @@ class LocomotionEnv(AntEnv):
         self._kind[self.feet] = 2
         self._foot_index = np.full(model.ngeom, -1, np.int64)
         self._foot_index[self.feet] = np.arange(len(self.feet))
+        self._kinds, self._foot_of = self._kind.tolist(), self._foot_index.tolist()  # per-step lookups, no arrays
+        self._forces = np.empty_like(self.data.cfrc_ext)  # contact_cost's buffer
         self.foot_names = [model.geom(g).name or f"foot {i}" for i, g in enumerate(self.feet)]
         self.foot_corners = self._corners()
 
@@ -610,23 +612,23 @@ class LocomotionEnv(AntEnv):
         mujoco.mj_rnePostConstraint(model, data)
 
     def _ground_partners(self) -> np.ndarray:
-        """The geoms in contact with the ground or the step (one entry per contact)."""
-        pairs = self.data.contact.geom
-        if len(pairs) == 0:
-            return np.zeros(0, np.int64)
-        ground = self._kind[pairs] == 1
-        return np.where(ground[:, 0], pairs[:, 1], pairs[:, 0])[ground.any(axis=1)]
+        """The geoms in contact with the ground or the step (one entry per contact, in contact order)."""
+        kinds = self._kinds  # a handful of contacts: Python over their list beats numpy's per-call cost
+        return np.array([b if kinds[a] == 1 else a for a, b in self.data.contact.geom.tolist()
+                         if kinds[a] == 1 or kinds[b] == 1], np.int64)
 
     def _read_contacts(self) -> tuple:
         """(the geoms touching the ground or the step, a ground-contact flag per foot, the number of
         geoms of non-foot bodies among them), as the simulator stands now."""
-        feet = np.zeros(len(self.feet), bool)
-        partner = self._ground_partners()
-        if len(partner) == 0:
-            return partner, feet, 0
-        partner_kind = self._kind[partner]
-        feet[self._foot_index[partner[partner_kind == 2]]] = True
-        return partner, feet, len(set(partner[partner_kind == 3].tolist()))
+        feet, body = np.zeros(len(self.feet), bool), set()
+        partners = self._ground_partners()
+        for geom in partners.tolist():
+            kind = self._kinds[geom]
+            if kind == 2:
+                feet[self._foot_of[geom]] = True
+            elif kind == 3:
+                body.add(geom)
+        return partners, feet, len(body)
 
     def _contacts(self) -> tuple:
         """(a ground-contact flag per foot, the number of geoms of non-foot bodies touching the ground):
@@ -674,6 +676,16 @@ class LocomotionEnv(AntEnv):
         if self._target_speed is not None:
             speed = min(speed, self._target_speed)
         return super()._get_rew(speed, action)
+
+    # Ant-v5's two costs, the same floats with fewer numpy calls (they run at every control step)
+    def control_cost(self, action):
+        return self._ctrl_cost_weight * np.square(action).sum()
+
+    @property
+    def contact_cost(self):
+        low, high = self._contact_force_range  # np.clip's values, clipped in place in a buffer
+        forces = np.maximum(self.data.cfrc_ext, low, out=self._forces)
+        return self._contact_cost_weight * np.square(np.minimum(forces, high, out=forces), out=forces).sum()
 
     def _legged_terms(self, action) -> tuple:
         """The legged-locomotion reward terms whose weight is not 0: (their sum, each term signed)."""
