@@ -181,6 +181,19 @@ def test_presets_carry_their_documents_settings():
     assert step.env.xml_file == "quadruped_step.xml" and step.init_from_optimizer and step.optim.lr == 1e-5
 
 
+def test_the_halfcheetah_study_preset_is_the_env_file_with_its_best_trials_values():
+    """experiment=halfcheetah_study (issue 33's pre-registered row on seeds 16-20) is HalfCheetah-v4's env file with
+    Optuna trial 1's eight values and nothing else."""
+    env_file = compose_config(["env=HalfCheetah-v4"])
+    preset = compose_config(["experiment=halfcheetah_study"])
+    trial = {"optim.lr": 5e-5, "advantage.gamma": 0.99, "advantage.lmbda": 0.92, "policy.log_std_init": -1.0,
+             "policy.width": 128, "loss.clip_epsilon": 0.2, "loss.epochs": 10, "loss.entropy_coef": 0.002}
+    assert {key: OmegaConf.select(preset, key) for key in trial} == trial
+    for key, value in trial.items():
+        OmegaConf.update(env_file, key, value)
+    assert env_file == preset
+
+
 def test_a_stored_study_with_another_space_is_refused_and_stale_trials_are_failed():
     """hparams_search on a stored study: another search space is one line (Optuna would fail in the first trial
     and leave it RUNNING); trials an interrupted sweep left RUNNING are marked failed."""
