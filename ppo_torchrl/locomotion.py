@@ -339,9 +339,8 @@ class LocomotionEnv(AntEnv):
         foot_bodies = set(model.geom_bodyid[self.feet].tolist())
         self._kind[[g for g in robot if model.geom_bodyid[g] not in foot_bodies]] = 3
         self._kind[self.feet] = 2
-        self._foot_index = np.full(model.ngeom, -1, np.int64)
-        self._foot_index[self.feet] = np.arange(len(self.feet))
-        self._kinds, self._foot_of = self._kind.tolist(), self._foot_index.tolist()  # per-step lookups, no arrays
+        self._kinds = self._kind.tolist()  # the per-step lookups, without arrays
+        self._foot_of = {geom: i for i, geom in enumerate(self.feet.tolist())}  # a foot geom's place in self.feet
         self._forces = np.empty_like(self.data.cfrc_ext)  # contact_cost's buffer
         self.foot_names = [model.geom(g).name or f"foot {i}" for i, g in enumerate(self.feet)]
         self.foot_corners = self._corners()
