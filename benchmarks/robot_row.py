@@ -2,11 +2,13 @@
 seed's height sweep (`python -m ppo_torchrl.evaluate run=<seed dir> ... heights=... out=<seed dir>/<sweep>`).
 
     python benchmarks/robot_row.py <seed dir> [<seed dir> ...] --sweep sweep_seed7777 [--goal-height 0.15] [--out table.md]
+        [--curves curves.png]
 
 Tables: success (crossed and not terminated) per height; per height and seed, each foot's share on the ground,
 touchdowns per second, the episodes with a foot up over 0.5 s while the robot moves (and the median episode's
 longest such swing), the diagonal pairs' figure, the stride and the joint-speed line; then the trot's goals
-(issue 31 item 3) and the climb's (item 4), each seed passed or missed.
+(issue 31 item 3) and the climb's (item 4), each seed passed or missed. --curves: each seed's training curves
+through both stages (`<seed dir>/stage1/metrics.csv`, then `<seed dir>/metrics.csv` from where stage 1 ended).
 """
 
 import argparse
@@ -15,6 +17,8 @@ import json
 from pathlib import Path
 
 import numpy as np
+
+from ppo_torchrl.report import read_metrics
 
 SWING_S = 0.5  # the trot's longest swing while moving
 SHARE = (0.35, 0.65)  # each foot's share on the ground
@@ -95,13 +99,54 @@ def table(seeds: dict, goal_height: float) -> str:
     return "\n".join(out) + "\n"
 
 
+CURVES = (("train/return_last100", "train return, mean of the last 100 episodes"),
+          ("eval/return_mean", "in-training eval return (deterministic, 15 cm)"),
+          ("eval/success_rate", "in-training eval success (crossed, not terminated)"),
+          ("env/terrain_level", "curriculum: the step's top height (m)"))
+
+
+def curves(seed_dirs, out: Path) -> None:
+    """One panel per CURVES key, one line per seed: stage 1, then stage 2 from the frame stage 1 ended on."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(2, 2, figsize=(13, 8), constrained_layout=True)
+    stage_ends = set()  # where a seed's second stage starts: a dotted line
+    for d in seed_dirs:
+        stages = [read_metrics(p) for p in (d / "stage1" / "metrics.csv", d / "metrics.csv") if p.is_file()]
+        offset, frames, series = 0.0, [], {key: [] for key, _ in CURVES}
+        for m in stages:
+            frames += [offset + f for f in m["frames"]]
+            for key in series:
+                series[key] += m.get(key, [float("nan")] * len(m["frames"]))
+            offset = frames[-1]
+        stage_ends.update(np.cumsum([m["frames"][-1] for m in stages])[:-1])
+        for ax, (key, title) in zip(axes.flat, CURVES):
+            x, y = np.asarray(frames), np.asarray(series[key])
+            keep = ~np.isnan(y)
+            ax.plot(x[keep], y[keep], marker="o" if keep.sum() < 50 else None, markersize=3, label=d.name)
+            ax.set(title=title, xlabel="frames (both stages)")
+    for ax in axes.flat:
+        for end in stage_ends:
+            ax.axvline(end, color="grey", linestyle=":", linewidth=1)
+        ax.grid(alpha=0.3)
+        ax.legend(loc="best")
+    fig.savefig(out, dpi=80)
+    plt.close(fig)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("seed_dirs", nargs="+", type=Path)
     parser.add_argument("--sweep", default="sweep_seed7777", help="the sweep's folder in each seed dir")
     parser.add_argument("--goal-height", type=float, default=0.15)
     parser.add_argument("--out", type=Path)
+    parser.add_argument("--curves", type=Path, help="write the seeds' training curves here (PNG)")
     args = parser.parse_args()
+    if args.curves:
+        curves(args.seed_dirs, args.curves)
     text = table({d.name: load(d, args.sweep) for d in args.seed_dirs}, args.goal_height)
     if args.out:
         args.out.write_text(text)
