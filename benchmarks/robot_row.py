@@ -100,7 +100,7 @@ def table(seeds: dict, goal_height: float) -> str:
 
 
 CURVES = (("train/return_last100", "train return, mean of the last 100 episodes"),
-          ("eval/return_mean", "in-training eval return (deterministic, 15 cm)"),
+          ("eval/return_mean", "in-training eval return (deterministic, the eval step)"),
           ("eval/success_rate", "in-training eval success (crossed, not terminated)"),
           ("env/terrain_level", "curriculum: the step's top height (m)"))
 
@@ -116,15 +116,11 @@ def curves(seed_dirs, out: Path) -> None:
     stage_ends = set()  # where a seed's second stage starts: a dotted line
     for d in seed_dirs:
         stages = [read_metrics(p) for p in (d / "stage1" / "metrics.csv", d / "metrics.csv") if p.is_file()]
-        offset, frames, series = 0.0, [], {key: [] for key, _ in CURVES}
-        for m in stages:
-            frames += [offset + f for f in m["frames"]]
-            for key in series:
-                series[key] += m.get(key, [float("nan")] * len(m["frames"]))
-            offset = frames[-1]
-        stage_ends.update(np.cumsum([m["frames"][-1] for m in stages])[:-1])
+        starts = np.cumsum([0.0] + [m["frames"][-1] for m in stages[:-1]])
+        stage_ends.update(starts[1:])
+        x = np.concatenate([start + np.asarray(m["frames"]) for start, m in zip(starts, stages)])
         for ax, (key, title) in zip(axes.flat, CURVES):
-            x, y = np.asarray(frames), np.asarray(series[key])
+            y = np.concatenate([m.get(key, [np.nan] * len(m["frames"])) for m in stages])
             keep = ~np.isnan(y)
             ax.plot(x[keep], y[keep], marker="o" if keep.sum() < 50 else None, markersize=3, label=d.name)
             ax.set(title=title, xlabel="frames (both stages)")
