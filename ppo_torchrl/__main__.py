@@ -165,14 +165,24 @@ def check_resume(resume: str, overrides: list[str]) -> Path:
 
 def run_name(experiment, env_choice, env_id, xml_file) -> str:
     """What a run dir is named by (conf/config.yaml: hydra.run.dir): the preset, else the env file
-    (quadruped_step), else for env=gym the id, for env=mjcf the model file (robot for robot.xml)."""
+    (quadruped_step), else for env=gym the id; a model file given to env=mjcf adds its stem, to env=legged
+    (or a scene.xml to env=mjcf) the model's name (legged_trot_go1, go1: not scene)."""
+    robot = None
+    if xml_file and env_choice == "mjcf" and Path(str(xml_file)).stem != "scene":
+        robot = Path(str(xml_file)).stem
+    elif xml_file and env_choice in ("mjcf", "legged"):
+        from ppo_torchrl.envs import resolve_model_file
+        from ppo_torchrl.robots.model import robot_label
+
+        try:
+            robot = robot_label(resolve_model_file(str(xml_file)))
+        except ConfigError:  # no such file: the config check says so, with its reason
+            robot = Path(str(xml_file)).stem
     if experiment is not None:
-        return str(experiment)
+        return f"{experiment}_{robot}" if robot and env_choice == "legged" else str(experiment)
     if env_choice == "gym":
         return str(env_id)
-    if env_choice == "mjcf" and xml_file:
-        return Path(str(xml_file)).stem
-    return str(env_choice)
+    return robot or str(env_choice)
 
 
 def register_resolvers() -> None:

@@ -38,7 +38,7 @@ class TransformsConfig:
 
 @dataclass
 class LocomotionConfig:
-    """An MJCF locomotion env (env=mjcf; locomotion.py): Gymnasium Ant-v5's reward and termination knobs,
+    """An MJCF locomotion env (env=mjcf; robots/env.py): Gymnasium Ant-v5's reward and termination knobs,
     then heading, actuator limits and legged-locomotion reward terms (defaults: off, Ant-v5's behaviour)."""
 
     forward_reward_weight: float = 1.0  # x velocity of main_body, m/s
@@ -60,7 +60,7 @@ class LocomotionConfig:
     heading: str = "x"
     # The forward reward counts speed up to this (m/s) and no more; null: all of it (Gymnasium's).
     target_speed: Optional[float] = None
-    # Actuators (each must drive a joint; null: as the model file has them). locomotion.py explains the choice.
+    # Actuators (each must drive a joint; null: as the model file has them). robots/env.py explains the choice.
     torque_limit: Optional[float] = None  # N m: every actuator's peak joint torque (its forcerange)
     # rad/s: the drive's torque-speed line, net driving torque <= torque_limit x (1 - speed / this):
     # joint damping of torque_limit / joint_speed_limit on each actuated joint (a motor's back-EMF,
@@ -102,7 +102,7 @@ class LocomotionConfig:
 
 @dataclass
 class TerrainConfig:
-    """The step of a step env, set per episode, and what the policy perceives (locomotion.py).
+    """The step of a step env, set per episode, and what the policy perceives (robots/terrain.py).
 
     Step keys need a model with a body named `step` holding one box geom (env=quadruped_step); with
     none of them set the step stays where the model file puts it. The observation keys work on any model.
@@ -142,6 +142,35 @@ class TerrainConfig:
 
 
 @dataclass
+class LeggedConfig:
+    """env=legged: a robot read from its model (robots/model.py) and the recipe's targets, each in the
+    robot's own units (robots/recipe.py turns them into env.locomotion and env.terrain values): lengths
+    in leg lengths l, speeds in sqrt(g l), times in sqrt(l / g), torques in m g l. No number here
+    belongs to one robot."""
+
+    keyframe: Optional[str] = None  # the standing pose: this keyframe, else the model's 'home', else qpos0
+    action_scale: float = 0.5  # rad: each joint's target is its standing angle + action_scale x action (in [-1, 1])
+    control_dt: float = 0.02  # s: the policy acts every control_dt (frame_skip = control_dt / the model's timestep)
+    target_speed: float = 0.35  # x sqrt(g l): the forward reward counts speed up to this
+    forward_reward_weight: float = 3.5  # per sqrt(g l) of forward speed
+    fall_height: float = 0.4  # x l: the trunk below this (m above the floor) is a fall
+    too_high: float = 2.5  # x l: the trunk above this ends the episode too
+    gait_period: Optional[float] = 2.66  # x sqrt(l / g): the trot clock's period; null: no clock
+    gait_clock_weight: float = 0.5
+    torque_cost_weight: float = 0.42  # x sum (torque / (m g l))^2
+    joint_speed_cost_weight: float = 0.02  # x sum (joint speed x sqrt(l / g))^2
+    foot_slip_cost_weight: float = 0.25  # x sum over feet down of (foot speed / sqrt(g l))^2
+    base_height_cost_weight: float = 1.25  # x ((trunk height above the ground - its standing height) / l)^2
+    step_height: float = 0.25  # x l: the step evaluation climbs (evaluate with no heights=)
+    step_height_range: List[float] = field(default_factory=lambda: [0.0, 0.4])  # x l: training's range
+    curriculum_step: float = 0.04  # x l
+    curriculum_band: Optional[float] = 0.08  # x l
+    step_distance: List[float] = field(default_factory=lambda: [2.0, 4.0])  # x l: the step's edge from the start
+    success_margin: float = 1.0  # x l beyond the edge: crossed
+    height_sample_spacing: float = 0.2  # x l
+
+
+@dataclass
 class EnvConfig:
     """Which Gymnasium environment to train on (envs.py)."""
 
@@ -154,6 +183,8 @@ class EnvConfig:
     xml_file: Optional[str] = None
     locomotion: LocomotionConfig = field(default_factory=LocomotionConfig)
     terrain: TerrainConfig = field(default_factory=TerrainConfig)
+    # env=legged: the robot of xml_file read from its model and the recipe scaled to it; null: not a legged env
+    legged: Optional[LeggedConfig] = None
     transforms: TransformsConfig = field(default_factory=TransformsConfig)
 
 

@@ -68,9 +68,20 @@ def check_env_id(env_id: str) -> None:
 
 
 def env_label(env_cfg) -> str:
-    """How runs name their env: the id, or the id and model file for env=mjcf (mjcf:quadruped.xml)."""
+    """How runs name their env: the id; with a model file, legged:<the model's name> for env=legged
+    (legged:go1), else mjcf:<the file's name> (mjcf:quadruped.xml), a Menagerie scene.xml by the model's name."""
     xml_file = env_cfg.get("xml_file")
-    return f"{env_cfg.get('id')}:{Path(xml_file).name}" if xml_file else str(env_cfg.get("id"))
+    if not xml_file:
+        return str(env_cfg.get("id"))
+    name = Path(str(xml_file)).name
+    if env_cfg.get("legged") is not None or Path(name).stem == "scene":
+        from ppo_torchrl.robots.model import robot_label
+
+        try:
+            name = robot_label(resolve_model_file(str(xml_file)))
+        except ConfigError:
+            pass
+    return f"{'legged' if env_cfg.get('legged') is not None else env_cfg.get('id')}:{name}"
 
 
 def resolve_model_file(xml_file: str) -> Path:
@@ -128,6 +139,13 @@ def mjcf_kwargs(env_cfg) -> dict:
         raise ConfigError(f"env.xml_file needs env=mjcf (or env.id={MJCF_ENV_ID}), not env.id={env_cfg.id}")
     path = resolve_model_file(env_cfg.xml_file)
     info = check_mjcf(path)
+    robot = None
+    if env_cfg.get("legged") is not None:  # env=legged: the robot read from its model, the recipe scaled to it
+        from ppo_torchrl.robots.model import read_robot
+        from ppo_torchrl.robots.recipe import scaled_env
+
+        env_cfg = scaled_env(env_cfg, read_robot(path, env_cfg.legged.keyframe))
+        robot = {"keyframe": env_cfg.legged.keyframe, "action_scale": env_cfg.legged.action_scale}
     loco = env_cfg.locomotion
     low, high = loco.healthy_z_range
     if not low < high:
@@ -138,11 +156,11 @@ def mjcf_kwargs(env_cfg) -> dict:
         raise ConfigError(f"env.locomotion.main_body={loco.main_body} is not a body of {path.name} "
                           f"(a body name, e.g. {named}, or an id in 1..{len(info.bodies) - 1})")
     kwargs = {"camera_name": TRACKING_CAMERA} if TRACKING_CAMERA in info.cameras else {}
-    from ppo_torchrl.locomotion import LEGGED_KEYS
+    from ppo_torchrl.robots.env import LEGGED_KEYS
 
     return {
         **kwargs,
-        # locomotion.py: heading, actuator limits, legged reward terms; terrain and observation extras
+        # robots/env.py: heading, actuator limits, legged reward terms; terrain and observation extras
         "legged": {key: _plain(loco.get(key)) for key in LEGGED_KEYS},
         "terrain": _plain(env_cfg.get("terrain")) or {},
         "xml_file": str(path),
@@ -156,6 +174,7 @@ def mjcf_kwargs(env_cfg) -> dict:
         "reset_noise_scale": loco.reset_noise_scale,
         "main_body": main_body,
         "include_cfrc_ext_in_observation": loco.contact_forces_in_observation,
+        **({"robot": robot} if robot is not None else {}),
     }
 
 
@@ -171,7 +190,9 @@ def gym_make_kwargs(env_cfg, render_mode: Optional[str] = None, evaluation: bool
     evaluation: an eval env (terrain: env.terrain.eval_step_height, no curriculum)."""
     check_env_id(env_cfg.id)
     if env_cfg.id == MJCF_ID and not env_cfg.get("xml_file"):
-        raise ConfigError("env=mjcf needs the robot's model file: env.xml_file=<path to an MJCF file with a free joint>")
+        which = "env=legged" if env_cfg.get("legged") is not None else "env=mjcf"
+        raise ConfigError(f"{which} needs the robot's model file: env.xml_file=<path to an MJCF file with a free joint>, "
+                          "e.g. a MuJoCo Menagerie robot's scene.xml")
     kwargs = mjcf_kwargs(env_cfg) if env_cfg.get("xml_file") else {}
     if kwargs:
         kwargs["evaluation"] = evaluation
@@ -197,7 +218,7 @@ def tracking_camera(env_id: str) -> dict:
     """The gym.make kwargs of a video that follows the robot. Gymnasium's MuJoCo models carry a `track` camera
     on the torso in trackcom mode (Hopper, Walker2d, HalfCheetah, Ant, Humanoid), but Gymnasium 1.x renders from
     a free camera that stays where the episode began unless the camera is named. A MuJoCo env without one falls
-    back to that free camera; other envs take no camera. (MJCF robots: locomotion.py adds `track` when missing.)"""
+    back to that free camera; other envs take no camera. (MJCF robots: robots/env.py adds `track` when missing.)"""
     from gymnasium.envs.registration import load_env_creator
 
     try:
@@ -212,8 +233,8 @@ def tracking_camera(env_id: str) -> dict:
 def make_gym_env(env_cfg, render_mode: Optional[str] = None, evaluation: bool = False, **render_kwargs) -> gym.Env:
     kwargs = gym_make_kwargs(env_cfg, render_mode, evaluation, **render_kwargs)
     env_id = env_cfg.id
-    if env_cfg.get("xml_file"):  # an MJCF robot: Ant-v5's class with locomotion.py's additions
-        from ppo_torchrl.locomotion import LOCOMOTION_ID, register
+    if env_cfg.get("xml_file"):  # an MJCF robot: Ant-v5's class with robots/env.py's additions
+        from ppo_torchrl.robots.env import LOCOMOTION_ID, register
 
         register()
         env_id = LOCOMOTION_ID
@@ -225,7 +246,7 @@ def make_gym_env(env_cfg, render_mode: Optional[str] = None, evaluation: bool = 
     except (gym.error.Error, ImportError, TypeError, ValueError) as exc:  # a missing extra, a bad make_kwargs
         first = next((l.strip() for l in str(exc).splitlines() if l.strip()), "")
         raise ConfigError(f"cannot make env '{env_cfg.id}': {type(exc).__name__}: {first}") from None
-    if env_cfg.get("xml_file"):
+    if env_cfg.get("xml_file") and env_cfg.get("legged") is None:  # env=legged acts in [-1, 1] (robots/env.py)
         _ctrl_bounds_from_force(env, check_mjcf(resolve_model_file(env_cfg.xml_file)))
     if not isinstance(env.action_space, gym.spaces.Box):
         raise ConfigError(

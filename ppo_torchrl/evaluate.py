@@ -33,7 +33,8 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type
 from ppo_torchrl.envs import env_label, episode_seeds, make_torchrl_env
 from ppo_torchrl.positions import GymEnvs
 from ppo_torchrl.errors import ConfigError
-from ppo_torchrl.locomotion import FOOT_PAIRS, LocomotionEnv
+from ppo_torchrl.robots.env import LocomotionEnv
+from ppo_torchrl.robots.gait import FOOT_PAIRS
 from ppo_torchrl.models import ActorCritic, deterministic_policy
 
 # Videos play in real time: one frame per control step when the control rate is at most VIDEO_MAX_FPS,
@@ -387,7 +388,8 @@ def apply_overrides(cfg, overrides: list[str]):
     """`env.<key>=<value>` arguments on the run's saved config, typed and checked as training checks them."""
     from omegaconf import OmegaConf
 
-    from ppo_torchrl.locomotion import locomotion_checks, terrain_checks
+    from ppo_torchrl.robots.env import locomotion_checks
+    from ppo_torchrl.robots.terrain import terrain_checks
 
     for override in overrides:
         try:

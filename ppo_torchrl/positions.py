@@ -44,7 +44,7 @@ def get_env_state(env: gym.Env) -> dict:
     """What a bit-exact continuation of this episode needs: the MuJoCo integration state
     (qpos, qvel, act, time, warm start), the time-limit counter, the env's RNG and the episode so far."""
     state = {"np_random": env.unwrapped.np_random.bit_generator.state}
-    if hasattr(env.unwrapped, "get_extra_state"):  # locomotion.py: the step, curriculum, last action, air times
+    if hasattr(env.unwrapped, "get_extra_state"):  # robots/env.py: the step, curriculum, last action, air times
         state["extra"] = env.unwrapped.get_extra_state()
     limit = _find_wrapper(env, gym.wrappers.TimeLimit)
     if limit is not None:

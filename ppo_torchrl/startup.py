@@ -64,9 +64,19 @@ def describe_start(cfg, cli_overrides: list[str]) -> str:
     changed = [f"{key}={show(value)}" for key, value in flatten(OmegaConf.to_container(cfg, resolve=True)).items()
                if key in defaults and value != defaults[key] and not key.startswith(NOT_SHOWN)
                and not (key in users and users[key] in (value, None)) and key not in unread]
-    if not changed:
-        return job_tag() + line + "; the env file/preset changes no defaults"
-    return job_tag() + line + f"; set by the env file/preset: {', '.join(changed)}"
+    line += "; the env file/preset changes no defaults" if not changed else f"; set by the env file/preset: {', '.join(changed)}"
+    return job_tag() + line + robot_line(cfg.env)
+
+
+def robot_line(env_cfg) -> str:
+    """env=legged: a second line, what was read from the robot's model and what the recipe asks of it."""
+    if env_cfg.get("legged") is None or not env_cfg.get("xml_file"):
+        return ""
+    from ppo_torchrl.envs import resolve_model_file
+    from ppo_torchrl.robots.model import read_robot
+    from ppo_torchrl.robots.recipe import describe
+
+    return "\n" + describe(read_robot(resolve_model_file(env_cfg.xml_file), env_cfg.legged.keyframe), env_cfg.legged)
 
 
 def user_values(cli_overrides: list[str]) -> dict:

@@ -119,14 +119,19 @@ def validate_config(cfg):
         one_of("logger", cfg.logger.name, LOGGERS),
         (cfg.torch_threads >= 1, f"torch_threads={cfg.torch_threads} must be >= 1"),
     ]
-    from ppo_torchrl.locomotion import locomotion_checks, terrain_checks
+    from ppo_torchrl.robots.env import locomotion_checks
+    from ppo_torchrl.robots.recipe import legged_checks, scaled_for_checks
+    from ppo_torchrl.robots.terrain import terrain_checks
 
-    checks += locomotion_checks(env.locomotion) + terrain_checks(env.get("terrain"))
-    for ok, message in checks:
+    for ok, message in checks + legged_checks(env.get("legged")):
+        if not ok:
+            raise ConfigError(message)
+    scaled = scaled_for_checks(env)  # env=legged: the values its recipe gives this robot are checked too
+    for ok, message in locomotion_checks(scaled.locomotion) + terrain_checks(scaled.get("terrain")):
         if not ok:
             raise ConfigError(message)
     if env.get("xml_file"):
-        from ppo_torchrl.locomotion import heading_angle
+        from ppo_torchrl.robots.env import heading_angle
 
         heading_angle(env.locomotion.heading)
     resolve_device(cfg.device)

@@ -1,4 +1,4 @@
-"""Issue 18: the locomotion env (locomotion.py): actuation limits, reward terms, terrain and its
+"""Issue 18: the locomotion env (robots/env.py and its mixins): actuation limits, reward terms, terrain and its
 curriculum, observation extras, heading, tracking camera, and evaluation across step heights."""
 
 import copy
@@ -545,7 +545,7 @@ def test_evaluate_at_a_step_height_reports_gait_figures(step_run, capsys):
 
 def test_the_gait_meter_counts_the_time_a_joint_is_over_the_speed_limit():
     from ppo_torchrl.evaluate import gait_figures
-    from ppo_torchrl.locomotion import GaitMeter
+    from ppo_torchrl.robots.gait import GaitMeter
 
     episodes = []
     for speeds in ([1.0, 9.0, 2.0, 8.0], [3.0] * 6):  # 8.0 is at the limit, not over it
@@ -559,7 +559,7 @@ def test_the_gait_meter_counts_the_time_a_joint_is_over_the_speed_limit():
 
 
 def test_success_is_crossing_without_a_fall_or_a_forbidden_contact():
-    from ppo_torchrl.locomotion import GaitMeter
+    from ppo_torchrl.robots.gait import GaitMeter
 
     gait = GaitMeter(4).summary()
     record = {"returns": [1.0, 2.0, 3.0, 4.0], "lengths": [500, 120, 500, 80], "dt": 0.02, "success_margin": 0.5,
@@ -586,7 +586,7 @@ def gait_of(pattern: str, corners=("LF", "RF", "LH", "RH"), repeats: int = 20):
     """Per-foot figures of a repeated contact pattern: each character a 0.05 s phase, the feet down in it
     ('a' LF+RH, 'b' RF+LH, 'l' LF+LH, 'r' RF+RH, 'f' LF+RF, 'h' LH+RH, '3' all but RH, '-' none)."""
     from ppo_torchrl.evaluate import gait_figures
-    from ppo_torchrl.locomotion import GaitMeter
+    from ppo_torchrl.robots.gait import GaitMeter
 
     down = {"a": "LF RH", "b": "RF LH", "l": "LF LH", "r": "RF RH", "f": "LF RF", "h": "LH RH", "3": "LF RF LH",
             "-": ""}
@@ -612,13 +612,13 @@ def test_per_foot_gait_figures_tell_a_trot_a_pace_a_bound_and_a_limp_apart():
     assert limp["duty_factor"] == pytest.approx(0.375)
     # the figures follow the model's foot order, whatever it is
     assert gait_of("a-b-", corners=("RH", "LH", "RF", "LF"))["diagonal_pairs_together"] == 1.0
-    from ppo_torchrl.locomotion import GaitMeter
+    from ppo_torchrl.robots.gait import GaitMeter
 
     assert "diagonal_pairs_together" not in evaluate.gait_figures([GaitMeter(3).summary()], None)  # no corners
 
 
 def test_a_foot_held_up_at_a_standstill_is_not_counted_as_in_the_air_while_moving():
-    from ppo_torchrl.locomotion import GaitMeter
+    from ppo_torchrl.robots.gait import GaitMeter
 
     meter, up, down = GaitMeter(1), np.array([False]), np.array([True])
     for feet, moving, seconds in ((up, True, 0.3), (up, False, 1.0), (up, True, 0.3), (down, True, 0.1),

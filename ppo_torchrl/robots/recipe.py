@@ -1,0 +1,134 @@
+"""The legged recipe scaled to a robot (env=legged): env.legged's targets, given in the robot's own units,
+become the env.locomotion and env.terrain values the env runs on, from the robot read from its model
+(robots/model.py). With l the leg length, m the mass and g gravity: lengths are multiples of l, speeds
+of sqrt(g l), times of sqrt(l / g), torques of m g l (dynamic similarity: a Go1 and an ANYmal B asked
+for the same multiples walk alike). The robot's own facts (trunk, heading, standing height, feet) are
+taken as read.
+
+Every value derived here has one owner, env.legged: setting the same key in env.locomotion or
+env.terrain is refused in one line (env.terrain.step_height, a fixed height, stays the user's: evaluate's
+height sweep sets it).
+"""
+
+from __future__ import annotations
+
+import math
+
+from omegaconf import OmegaConf
+
+from ppo_torchrl.errors import ConfigError
+from ppo_torchrl.robots.model import GRAVITY, Robot
+
+# env.locomotion / env.terrain keys env=legged derives (module doc), with the env.legged key each comes from
+DERIVED = {
+    "locomotion": {"main_body": None, "heading": None, "frame_skip": "control_dt", "target_speed": "target_speed",
+                   "forward_reward_weight": "forward_reward_weight", "healthy_z_range": "fall_height",
+                   "gait_period": "gait_period", "gait_clock_weight": "gait_clock_weight",
+                   "torque_cost_weight": "torque_cost_weight", "joint_speed_cost_weight": "joint_speed_cost_weight",
+                   "foot_slip_cost_weight": "foot_slip_cost_weight", "base_height_target": None,
+                   "base_height_cost_weight": "base_height_cost_weight", "terminate_on_contact": None,
+                   "foot_geoms": None},
+    "terrain": {"eval_step_height": "step_height", "step_height_range": "step_height_range",
+                "curriculum_step": "curriculum_step", "curriculum_band": "curriculum_band",
+                "step_distance": "step_distance", "success_margin": "success_margin",
+                "height_sample_spacing": "height_sample_spacing"},
+}
+
+
+def derived_values(robot: Robot, legged) -> dict:
+    """{'locomotion': {...}, 'terrain': {...}}: the values env.legged's targets take on this robot."""
+    l, speed, time = robot.leg_length, robot.speed_scale, robot.time_scale
+    weight_moment = robot.mass * GRAVITY * l  # N m
+    band = legged.curriculum_band
+    return {
+        "locomotion": {
+            "main_body": robot.trunk,
+            "heading": f"{math.degrees(math.atan2(robot.heading[1], robot.heading[0])):.6f}",
+            "frame_skip": max(1, round(legged.control_dt / robot.timestep)),
+            "target_speed": legged.target_speed * speed,
+            "forward_reward_weight": legged.forward_reward_weight / speed,
+            "healthy_z_range": [legged.fall_height * l, legged.too_high * l],
+            "gait_period": None if legged.gait_period is None else legged.gait_period * time,
+            "gait_clock_weight": legged.gait_clock_weight if legged.gait_period is not None else 0.0,
+            "torque_cost_weight": legged.torque_cost_weight / weight_moment ** 2,
+            "joint_speed_cost_weight": legged.joint_speed_cost_weight * time ** 2,
+            "foot_slip_cost_weight": legged.foot_slip_cost_weight / speed ** 2,
+            "base_height_target": robot.height,
+            "base_height_cost_weight": legged.base_height_cost_weight / l ** 2,
+            "terminate_on_contact": [robot.trunk],
+        },
+        "terrain": {
+            "eval_step_height": legged.step_height * l,
+            "step_height_range": [h * l for h in legged.step_height_range],
+            "curriculum_step": legged.curriculum_step * l,
+            "curriculum_band": None if band is None else band * l,
+            "step_distance": [d * l for d in legged.step_distance],
+            "success_margin": legged.success_margin * l,
+            "height_sample_spacing": legged.height_sample_spacing * l,
+        },
+    }
+
+
+def describe(robot: Robot, legged) -> str:
+    """The start line's account of a legged run: what was read from the model and what the recipe asks of it."""
+    values = derived_values(robot, legged)
+    loco, terrain = values["locomotion"], values["terrain"]
+    clock = f", trot clock {loco['gait_period']:.2f} s" if loco["gait_period"] else ""
+    return (f"{robot.describe()}; recipe: step {terrain['eval_step_height'] * 100:.1f} cm (0.25 l), speed up to "
+            f"{loco['target_speed']:.2f} m/s, fall under {loco['healthy_z_range'][0] * 100:.1f} cm, control every "
+            f"{loco['frame_skip'] * robot.timestep * 1000:g} ms{clock}").replace("(0.25 l)", f"({legged.step_height:g} l)")
+
+
+def scaled_env(env_cfg, robot: Robot):
+    """env_cfg with env.legged's targets turned into env.locomotion and env.terrain values for `robot`
+    (a copy; the config a run saves keeps the targets, so evaluate derives the same values again)."""
+    from ppo_torchrl.config import LocomotionConfig, TerrainConfig
+
+    defaults = {"locomotion": LocomotionConfig(), "terrain": TerrainConfig()}
+    for group, keys in DERIVED.items():
+        for key, source in keys.items():
+            given = env_cfg[group].get(key)
+            given = OmegaConf.to_container(given) if OmegaConf.is_config(given) else given
+            if given != getattr(defaults[group], key):
+                where = f"env.legged.{source}" if source else "the robot's model"
+                raise ConfigError(f"env.{group}.{key}={given}: env=legged derives it from {where} (robots/recipe.py); "
+                                  f"leave env.{group}.{key} unset" + (f" and set {where}" if source else ""))
+    scaled = OmegaConf.create(OmegaConf.to_container(env_cfg))
+    for group, values in derived_values(robot, env_cfg.legged).items():
+        for key, value in values.items():
+            scaled[group][key] = value
+    return scaled
+
+
+def scaled_for_checks(env_cfg):
+    """The env config whose locomotion and terrain values are checked: env=legged's scaled to its robot
+    (read from env.xml_file: a model that cannot be read is one line here), any other as it is."""
+    if env_cfg.get("legged") is None or not env_cfg.get("xml_file"):
+        return env_cfg
+    from ppo_torchrl.envs import resolve_model_file
+    from ppo_torchrl.robots.model import read_robot
+
+    return scaled_env(env_cfg, read_robot(resolve_model_file(env_cfg.xml_file), env_cfg.legged.keyframe))
+
+
+def legged_checks(legged) -> list:
+    """env.legged: positive scales, [min, max] ranges (validation.py calls it)."""
+    if legged is None:
+        return []
+    positive = ("action_scale", "control_dt", "target_speed", "fall_height", "too_high", "step_height",
+                "success_margin", "height_sample_spacing", "curriculum_step")
+    checks = [(legged[k] > 0, f"env.legged.{k}={legged[k]} must be > 0") for k in positive]
+    checks += [(legged[k] >= 0, f"env.legged.{k}={legged[k]} must be >= 0")
+               for k in ("forward_reward_weight", "gait_clock_weight", "torque_cost_weight", "joint_speed_cost_weight",
+                         "foot_slip_cost_weight", "base_height_cost_weight")]
+    checks.append((legged.fall_height < legged.too_high,
+                   f"env.legged.fall_height={legged.fall_height} must be under env.legged.too_high={legged.too_high}"))
+    checks.append((legged.gait_period is None or legged.gait_period > 0,
+                   f"env.legged.gait_period={legged.gait_period} must be > 0 (x sqrt(l / g)) or null"))
+    checks.append((legged.curriculum_band is None or legged.curriculum_band > 0,
+                   f"env.legged.curriculum_band={legged.curriculum_band} must be > 0 (x l) or null"))
+    for key, floor in (("step_height_range", 0), ("step_distance", 1e-9)):
+        span = list(legged[key])
+        checks.append((len(span) == 2 and span[0] >= floor and span[0] <= span[1],
+                       f"env.legged.{key}={span} must be [min, max] with {'0 <= min' if floor == 0 else '0 < min'} <= max"))
+    return checks
