@@ -78,13 +78,15 @@ def run(main) -> None:
 
 
 def resolve_run(arg: str) -> Path:
-    """A run dir argument as a path: `latest` is the newest run dir under outputs/ (the newest summary.json of a
-    dir this app made), `latest/<env>` the newest of that env (summary.json's env, or its model file's name:
+    """A run dir argument as a path: `latest` is the newest usable run dir under outputs/ (by its summary.json,
+    in a dir this app made): a finished or interrupted run before one that was killed, never one still
+    training (its dir locked) or failed; a damaged summary.json is skipped with a warning line.
+    `latest/<env>` is the newest of that env (summary.json's env, or its model file's name:
     latest/quadruped_step); a path that exists is itself. Says on stderr which run `latest` picked."""
     name, _, env = arg.partition("/")
     if name != LATEST or Path(arg).exists():
         return Path(arg)
-    from ppo_torchrl.rundir import MANIFEST
+    from ppo_torchrl.rundir import MANIFEST, in_use
 
     runs, envs = [], set()
     for root, dirs, files in os.walk(OUTPUTS):
@@ -96,13 +98,20 @@ def resolve_run(arg: str) -> Path:
             continue
         try:
             info = json.loads(summary.read_text())
-        except (OSError, ValueError):
+            if not isinstance(info, dict):
+                raise ValueError("not a JSON object")
+            frames = int(info.get("frames") or 0)
+        except (OSError, ValueError, TypeError) as exc:
+            print(f"warning: {arg}: skipped {summary}, which cannot be read ({exc})", file=sys.stderr, flush=True)
             continue
         label = str(info.get("env"))
         envs.add(label)
         if env and env not in (label, Path(label.partition(":")[2]).stem):
             continue
-        runs.append((summary.stat().st_mtime, Path(root), info))
+        if info.get("status") == "failed" or in_use(Path(root)):
+            continue
+        info["frames"] = frames
+        runs.append(((info.get("status") in ("finished", "interrupted"), summary.stat().st_mtime), Path(root), info))
     if not runs:
         where = f"{OUTPUTS}/ (in {Path.cwd()})"
         if env and envs:

@@ -402,14 +402,30 @@ def apply_overrides(cfg, overrides: list[str]):
     return cfg
 
 
-def parse_heights(text: str) -> list[float]:
+def parse_heights(text: str) -> list[tuple]:
+    """heights=0,0.05,0.1 (m) or, for env=legged, in leg lengths: 0,0.2l,0.25l,0.3l. [(value, in leg lengths)]."""
+    example = "e.g. 0,0.05,0.1,0.15,0.2 (m) or, for env=legged, 0,0.2l,0.25l,0.3l (leg lengths)"
     try:
-        heights = [float(h) for h in text.split(",") if h.strip()]
+        heights = [(float(h.strip()[:-1]), True) if h.strip().endswith("l") else (float(h), False)
+                   for h in text.split(",") if h.strip()]
     except ValueError:
-        raise ConfigError(f"heights={text}: expected step heights in m separated by commas, e.g. 0,0.05,0.1,0.15,0.2") from None
-    if not heights or any(not (h >= 0 and math.isfinite(h)) for h in heights):
-        raise ConfigError(f"heights={text}: expected step heights >= 0 (m) separated by commas, e.g. 0,0.05,0.1,0.15,0.2")
+        raise ConfigError(f"heights={text}: expected step heights separated by commas, {example}") from None
+    if not heights or any(not (h >= 0 and math.isfinite(h)) for h, _ in heights):
+        raise ConfigError(f"heights={text}: expected step heights >= 0 separated by commas, {example}")
     return heights
+
+
+def heights_in_metres(heights: list[tuple], env_cfg) -> list[float]:
+    """parse_heights' values in m: a height in leg lengths times the robot's (read from its model)."""
+    if not any(legs for _, legs in heights):
+        return [h for h, _ in heights]
+    if env_cfg.get("legged") is None:
+        raise ConfigError("heights in leg lengths (0.25l) need a run of env=legged, whose robot has one; give m here")
+    from ppo_torchrl.envs import resolve_model_file
+    from ppo_torchrl.robots.model import read_robot
+
+    leg = read_robot(resolve_model_file(env_cfg.xml_file), env_cfg.legged.keyframe).leg_length
+    return [round(h * leg, 6) if legs else h for h, legs in heights]
 
 
 def sweep_row(height: float, episodes: int, result: dict) -> dict:
@@ -505,7 +521,7 @@ def main(argv: list[str]) -> dict:
         "video_length": "at most this many seconds of video in all, which is simulated time as videos play in real "
                         "time; empty: whole episodes (implies video=true)",
         "seed": "episode i starts from seed * 1000 + i: the same seed replays the same episodes",
-        "heights": "step heights in m, e.g. 0,0.05,0.1,0.15,0.2: evaluate at each; writes height_sweep.csv and the "
+        "heights": "step heights in m, e.g. 0,0.05,0.1,0.15,0.2, or in leg lengths for env=legged, 0,0.2l,0.25l,0.3l: evaluate at each; writes height_sweep.csv and the "
                    "success-rate curve height_sweep.png",
         "out": "where the eval writes its files: eval.json, the video, a height sweep's (empty: <run dir>/eval)",
     }
@@ -520,6 +536,9 @@ def main(argv: list[str]) -> dict:
                        "video_length": "", "seed": 0, "heights": "", "out": ""}, usage, help, about)
     if args["episodes"] < 1:
         raise ConfigError(f"episodes={args['episodes']} must be >= 1")
+    if not 0 <= args["seed"] * 1000 + args["episodes"] < 2**32:  # episode i's seed is seed * 1000 + i (32-bit)
+        raise ConfigError(f"seed={args['seed']} must be in 0..{(2**32 - args['episodes']) // 1000}: episode i starts "
+                          "from seed * 1000 + i")
     heights = parse_heights(args["heights"]) if args["heights"] else None
     if any(arg.startswith(("video_episodes=", "video_length=")) for arg in argv):
         args["video"] = True
@@ -538,6 +557,7 @@ def main(argv: list[str]) -> dict:
     obs_stats = state["normalization"]["obs"]
     label = f"{env_label(cfg.env)} @ {state['frames']} frames ({args['checkpoint']})"
     if heights:
+        heights = heights_in_metres(heights, cfg.env)
         rows = height_sweep(cfg, ac, obs_stats, heights, args["episodes"], args["seed"], out_dir,
                             f"{run_dir.resolve().name}\n{label}")
         print(f"{label}: height sweep over {args['episodes']} episodes per height: "

@@ -199,6 +199,27 @@ def lock(directory: Path) -> None:
     _held[directory] = fd
 
 
+def in_use(directory: Path) -> bool:
+    """Another process holds the dir's lock (a run still training there); leaves the lock as it was."""
+    directory = Path(directory).resolve()
+    if directory in _held:
+        return False
+    try:
+        fd = os.open(directory, os.O_RDONLY | os.O_DIRECTORY)
+    except OSError:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        fcntl.flock(fd, fcntl.LOCK_UN)
+        return False
+    except BlockingIOError:
+        return True
+    except OSError:
+        return False
+    finally:
+        os.close(fd)
+
+
 def claim(directory: Path, *, overwrite: bool = False, resume: bool = False, what: str = "run") -> Path:
     """Check the dir (see the module doc) and lock it; with overwrite, move the old run aside until `commit`.
     what="job": a sweep's job dir, checked with its sweep dir; what Hydra wrote there is the job's own."""

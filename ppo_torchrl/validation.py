@@ -23,6 +23,18 @@ DISTRIBUTED = ("ray",)
 RAY_INSTALL = 'pip install -e ".[ray]" (or: pip install "ray[default]<3")'
 
 
+def _scaled_for_checks(env_cfg):
+    """The env config whose locomotion and terrain values are checked: env=legged's scaled to its robot
+    (read from env.xml_file: a model that cannot be read is one line here), any other as it is."""
+    if env_cfg.get("legged") is None or not env_cfg.get("xml_file"):
+        return env_cfg
+    from ppo_torchrl.envs import resolve_model_file
+    from ppo_torchrl.robots.model import read_robot
+    from ppo_torchrl.robots.recipe import scaled_env
+
+    return scaled_env(env_cfg, read_robot(resolve_model_file(env_cfg.xml_file), env_cfg.legged.keyframe))
+
+
 def one_of(name: str, value, choices) -> tuple:
     return value in choices, f"{name}='{value}' is not known; use one of {', '.join(choices)}"
 
@@ -120,13 +132,13 @@ def validate_config(cfg):
         (cfg.torch_threads >= 1, f"torch_threads={cfg.torch_threads} must be >= 1"),
     ]
     from ppo_torchrl.robots.env import locomotion_checks
-    from ppo_torchrl.robots.recipe import legged_checks, scaled_for_checks
+    from ppo_torchrl.robots.recipe import legged_checks
     from ppo_torchrl.robots.terrain import terrain_checks
 
     for ok, message in checks + legged_checks(env.get("legged")):
         if not ok:
             raise ConfigError(message)
-    scaled = scaled_for_checks(env)  # env=legged: the values its recipe gives this robot are checked too
+    scaled = _scaled_for_checks(env)  # env=legged: the values its recipe gives this robot are checked too
     for ok, message in locomotion_checks(scaled.locomotion) + terrain_checks(scaled.get("terrain")):
         if not ok:
             raise ConfigError(message)

@@ -143,6 +143,37 @@ def test_latest_is_the_newest_run_dir_under_outputs(tmp_path, monkeypatch, capsy
     assert resolve_run("some/dir") == Path("some/dir")
 
 
+def test_latest_skips_runs_in_use_failed_and_damaged_and_prefers_finished_ones(tmp_path, monkeypatch, capsys):
+    """Issue 47: run=latest picks the newest run that can be used; a damaged summary.json is a warning line."""
+    import fcntl
+    import os
+    from pathlib import Path
+
+    from ppo_torchrl.cli import resolve_run
+
+    monkeypatch.chdir(tmp_path)
+    finished = fake_run(Path("outputs/runs/d/a_finished"), "Hopper-v4", 400)
+    killed = fake_run(Path("outputs/runs/d/b_killed"), "Hopper-v4", 300)  # kill -9: 'running', no lock held
+    (killed / "summary.json").write_text(json.dumps({"env": "Hopper-v4", "status": "running", "frames": 10}))
+    failed = fake_run(Path("outputs/runs/d/c_failed"), "Hopper-v4", 200)
+    (failed / "summary.json").write_text(json.dumps({"env": "Hopper-v4", "status": "failed", "frames": 10}))
+    training = fake_run(Path("outputs/runs/d/d_training"), "Hopper-v4", 100)
+    fd = os.open(training, os.O_RDONLY | os.O_DIRECTORY)
+    fcntl.flock(fd, fcntl.LOCK_EX)  # another process's run, still training
+    try:
+        damaged = fake_run(Path("outputs/runs/d/e_damaged"), "Hopper-v4", 0)
+        (damaged / "summary.json").write_text("[1, 2")
+        listed = fake_run(Path("outputs/runs/d/f_list"), "Hopper-v4", 0)
+        (listed / "summary.json").write_text("[1, 2]")
+        assert resolve_run("latest") == finished
+        err = capsys.readouterr().err.splitlines()
+        assert len(err) == 3 and sum(line.startswith("warning: latest: skipped ") for line in err) == 2
+        (finished / "summary.json").unlink()
+        assert resolve_run("latest") == killed  # no finished run left: the killed one can still be resumed
+    finally:
+        os.close(fd)
+
+
 @pytest.mark.parametrize("overrides, name", [
     (["env=Hopper-v4"], "Hopper-v4"),
     (["env=quadruped_step"], "quadruped_step"),  # not mjcf

@@ -267,3 +267,14 @@ def test_a_killed_collector_worker_is_one_line_and_a_failed_status(tmp_path):
     assert process.returncode == 1 and f"(pid {workers[-1]}) died (killed by SIGKILL)" in line
     assert "the last checkpoint on disk is" in line and "Traceback" not in err
     assert json.loads((run / "summary.json").read_text())["status"] == "failed"
+
+
+@pytest.mark.parametrize("seed", ["-5", "4294968"])
+def test_evaluate_a_seed_out_of_range_is_one_line_and_writes_nothing(finished_run, tmp_path, seed):
+    """Issue 47: episode i's seed is seed * 1000 + i, a 32-bit number: a seed outside that is one line, exit 2."""
+    run = copy_of(finished_run, tmp_path)
+    before = tree_digest(tmp_path)
+    result = run_cli(f"run={run}", f"seed={seed}", "episodes=1", module="ppo_torchrl.evaluate")
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 2 and len(lines) == 1 and lines[0].startswith(f"error: seed={seed} must be in 0.."), lines
+    assert tree_digest(tmp_path) == before

@@ -100,17 +100,6 @@ def scaled_env(env_cfg, robot: Robot):
     return scaled
 
 
-def scaled_for_checks(env_cfg):
-    """The env config whose locomotion and terrain values are checked: env=legged's scaled to its robot
-    (read from env.xml_file: a model that cannot be read is one line here), any other as it is."""
-    if env_cfg.get("legged") is None or not env_cfg.get("xml_file"):
-        return env_cfg
-    from ppo_torchrl.envs import resolve_model_file
-    from ppo_torchrl.robots.model import read_robot
-
-    return scaled_env(env_cfg, read_robot(resolve_model_file(env_cfg.xml_file), env_cfg.legged.keyframe))
-
-
 def legged_checks(legged) -> list:
     """env.legged: positive scales, [min, max] ranges (validation.py calls it)."""
     if legged is None:

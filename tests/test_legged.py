@@ -1,0 +1,252 @@
+"""Issue 46: a robot read from its model (env=legged, ppo_torchrl/robots/). The six MuJoCo Menagerie
+quadrupeds in ../shared/robots (their README gives the figures checked here), real file layouts, bad
+robots as one line, the step added to any model. No training."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+
+from ppo_torchrl.errors import ConfigError
+
+ROBOTS_DIR = Path(__file__).resolve().parents[2] / "shared" / "robots"
+needs_robots = pytest.mark.skipif(not ROBOTS_DIR.is_dir(), reason=f"no {ROBOTS_DIR} (the shared Menagerie robots)")
+
+# ../shared/robots/README.md: name, mass kg, home trunk z m, leg (thigh + shank) m, drive, heading, each corner's
+# foot (a geom name, or the body of an unnamed foot sphere)
+FACTS = {
+    "unitree_go1": ("go1", 12.743, 0.27, 0.426, "position", (1, 0), {"LF": "FL", "RF": "FR", "LH": "RL", "RH": "RR"}),
+    "unitree_go2": ("go2", 15.206, 0.27, 0.426, "motor", (1, 0), {"LF": "FL", "RF": "FR", "LH": "RL", "RH": "RR"}),
+    "unitree_a1": ("a1", 12.453, 0.27, 0.400, "position", (1, 0),
+                   {"LF": "FL_calf", "RF": "FR_calf", "LH": "RL_calf", "RH": "RR_calf"}),
+    "anybotics_anymal_b": ("anymal_b", 33.331, 0.58, 0.5877, "position", (-1, 0),
+                           {"LF": "LF_SHANK", "RF": "RF_SHANK", "LH": "LH_SHANK", "RH": "RH_SHANK"}),
+    "boston_dynamics_spot": ("spot", 50.34, 0.46, 0.6575, "position", (1, 0),
+                             {"LF": "FL", "RF": "FR", "LH": "HL", "RH": "HR"}),
+    "google_barkour_vb": ("barkour_vb", 14.496, 0.28, 0.4304, "position", (1, 0),
+                          {"LF": "foot_front_left", "RF": "foot_front_right", "LH": "foot_hind_left",
+                           "RH": "foot_hind_right"}),
+}
+
+
+def scene(folder: str) -> Path:
+    return ROBOTS_DIR / folder / "scene.xml"
+
+
+@needs_robots
+@pytest.mark.parametrize("folder", sorted(FACTS))
+def test_each_menagerie_robot_is_read_from_its_model_as_its_readme_gives_it(folder):
+    from ppo_torchrl.robots.model import read_robot
+
+    name, mass, height, leg, drive, heading, feet = FACTS[folder]
+    robot = read_robot(scene(folder))
+    model = mujoco.MjModel.from_xml_path(str(scene(folder)))
+    assert robot.name == name
+    assert robot.mass == pytest.approx(mass, abs=1e-3)
+    assert robot.height == pytest.approx(height, abs=1e-3)
+    assert robot.leg_length == pytest.approx(leg, abs=1e-3)
+    assert set(robot.drive) == {drive}
+    assert robot.heading == pytest.approx(heading, abs=1e-6)
+    by_corner = {}
+    for corner, geom in zip(robot.corners, robot.feet):
+        assert model.geom_type[geom] == mujoco.mjtGeom.mjGEOM_SPHERE  # every foot here is a sphere
+        by_corner[corner] = model.geom(geom).name or model.body(model.geom_bodyid[geom]).name
+    assert by_corner == feet
+    assert robot.keyframe == (None if folder == "anybotics_anymal_b" else "home")
+
+
+@needs_robots
+@pytest.mark.parametrize("folder", sorted(FACTS))
+def test_each_robot_stands_for_two_seconds_at_its_derived_pose_under_its_derived_drives(folder):
+    """The env's own start (no reset noise) and drives (action 0 holds the standing pose): the trunk stays
+    within 20% of its standing height and tilts under 30 degrees, with only its feet (and A1's calves,
+    Menagerie's geometry) on the floor."""
+    from ppo_torchrl.__main__ import compose
+    from ppo_torchrl.envs import make_gym_env
+
+    cfg = compose(["env=legged", f"env.xml_file={scene(folder)}", "env.locomotion.reset_noise_scale=0"])
+    env = make_gym_env(cfg.env)
+    robot = env.unwrapped
+    robot.reset(seed=0)
+    start = float(robot.data.qpos[2])
+    heights, tilts = [], []
+    for _ in range(int(round(2.0 / robot.dt))):
+        _, _, terminated, _, _ = robot.step(np.zeros(robot.model.nu))
+        assert not terminated
+        heights.append(robot.data.qpos[2])
+        tilts.append(math.degrees(math.acos(min(1.0, robot.data.xmat[robot._body_id][8]))))
+    assert start == pytest.approx(FACTS[folder][2], abs=1e-3)
+    assert max(abs(h - start) for h in heights) <= 0.2 * start
+    assert max(tilts) < 30.0
+    assert robot.feet_on_ground().all()
+    env.close()
+
+
+@needs_robots
+def test_torque_motors_become_pd_servos_around_the_standing_pose_with_gains_from_the_model():
+    """Go2's torque motors: kp = peak torque / 0.3 rad, kd = 2 sqrt(kp I); used as Menagerie ships them (its
+    keyframe's ctrl, angles, sent as torques) the robot collapses to 0.077 m (the robots' README)."""
+    from ppo_torchrl.robots.model import PD_SATURATION_RAD, read_robot
+
+    robot = read_robot(scene("unitree_go2"))
+    assert robot.kp[2] == pytest.approx(45.43 / PD_SATURATION_RAD)
+    assert all(kd > 0 for kd in robot.kd)
+    from ppo_torchrl.__main__ import compose
+    from ppo_torchrl.envs import make_gym_env
+
+    env = make_gym_env(compose(["env=legged", f"env.xml_file={scene('unitree_go2')}"]).env).unwrapped
+    env.reset(seed=0)
+    a = 2  # a knee: a position actuator around its standing angle, limited to the motor's torque
+    assert env.model.actuator_biastype[a] == mujoco.mjtBias.mjBIAS_AFFINE
+    assert env.model.actuator_forcerange[a].tolist() == pytest.approx([-45.43, 45.43])
+    assert env.ctrl_of(np.zeros(12))[a] == pytest.approx(-1.8)
+    assert env.ctrl_of(np.ones(12))[a] == pytest.approx(-1.3)
+
+
+@needs_robots
+def test_the_step_is_added_to_a_model_that_has_none_at_a_quarter_leg_length_and_faces_the_heading():
+    """ANYmal B faces -x: its step (0.25 l = 14.7 cm in evaluation) lies ahead of it, made by MjSpec at build
+    time; the model file is not touched."""
+    from ppo_torchrl.__main__ import compose
+    from ppo_torchrl.envs import make_gym_env
+
+    before = scene("anybotics_anymal_b").read_bytes(), (ROBOTS_DIR / "anybotics_anymal_b" / "anymal_b.xml").read_bytes()
+    cfg = compose(["env=legged", f"env.xml_file={scene('anybotics_anymal_b')}"])
+    env = make_gym_env(cfg.env, evaluation=True).unwrapped
+    env.reset(seed=3)
+    assert env.has_step and env.step_height == pytest.approx(0.25 * 0.5877, abs=1e-3)
+    ahead = env.terrain_height(np.array([env.step_edge - 0.01, env.step_edge + 0.01]))
+    assert ahead.tolist() == pytest.approx([0.0, env.step_height])
+    box = env.data.geom_xpos[env.model.geom("step").id]
+    assert box[0] < env.data.qpos[0] - 1.0  # the box lies towards world -x
+    assert env.crossed() is False
+    after = scene("anybotics_anymal_b").read_bytes(), (ROBOTS_DIR / "anybotics_anymal_b" / "anymal_b.xml").read_bytes()
+    assert before == after
+
+
+def tiny_stl() -> bytes:
+    """A binary STL of two triangles (MuJoCo reads binary STL only)."""
+    import struct
+
+    triangles = [((0, 0, 1), (0, 0, 0), (0.05, 0, 0), (0, 0.05, 0)), ((-1, 0, 0), (0, 0, 0), (0, 0.05, 0), (0, 0, 0.05))]
+    body = b"".join(struct.pack("<12fH", *[c for v in t for c in v], 0) for t in triangles)
+    return b"tiny".ljust(80, b" ") + struct.pack("<I", len(triangles)) + body
+
+
+def write_robot(folder: Path, *, free=True, feet=4, keyframe_in_scene=True, site_actuator=False) -> Path:
+    """A small four-legged robot in the Menagerie layout: robot.xml (a visual mesh from meshdir assets/) and
+    scene.xml that includes it and holds the floor and the 'home' keyframe."""
+    (folder / "assets").mkdir(parents=True, exist_ok=True)
+    (folder / "assets" / "shell.stl").write_bytes(tiny_stl())
+    legs = ""
+    for i, (name, x, y) in enumerate([("LF", 0.2, 0.1), ("RF", 0.2, -0.1), ("LH", -0.2, 0.1), ("RH", -0.2, -0.1)]):
+        if i >= feet:
+            break
+        legs += f"""
+      <body name="{name}_thigh" pos="{x} {y} 0">
+        <joint name="{name}_hip" axis="0 1 0" range="-1.5 1.5"/>
+        <geom type="capsule" fromto="0 0 0 0 0 -0.15" size="0.02" mass="0.3"/>
+        <body name="{name}_shank" pos="0 0 -0.15">
+          <joint name="{name}_knee" axis="0 1 0" range="-2.5 0"/>
+          <geom type="capsule" fromto="0 0 0 0 0 -0.15" size="0.015" mass="0.2"/>
+          <geom type="sphere" pos="0 0 -0.15" size="0.02" mass="0.05"/>
+        </body>
+      </body>"""
+    actuators = "".join(f'<position joint="{n}_{j}" kp="30" forcerange="-8 8" ctrlrange="-3 3"/>'
+                        for n in ("LF", "RF", "LH", "RH")[:feet] for j in ("hip", "knee"))
+    if site_actuator:
+        actuators += '<motor site="imu" gear="0 0 0 0 0 1" ctrlrange="-1 1"/>'
+    (folder / "robot.xml").write_text(f"""<mujoco model="tiny">
+  <compiler meshdir="assets"/>
+  <asset><mesh name="shell" file="shell.stl"/></asset>
+  <worldbody>
+    <body name="trunk" pos="0 0 0.32">
+      {'<freejoint/>' if free else ''}
+      <site name="imu"/>
+      <geom type="box" size="0.25 0.12 0.05" mass="4"/>
+      <geom type="mesh" mesh="shell" contype="0" conaffinity="0" group="2"/>{legs}
+    </body>
+  </worldbody>
+  <actuator>{actuators}</actuator>
+</mujoco>""")
+    nq = 7 * free + 2 * feet
+    home = "0 0 0.3 1 0 0 0 " + " ".join(["0.3 -0.6"] * feet) if free else " ".join(["0.3 -0.6"] * feet)
+    key = f'<keyframe><key name="home" qpos="{home}"/></keyframe>' if keyframe_in_scene and nq else ""
+    (folder / "scene.xml").write_text(f"""<mujoco model="tiny scene">
+  <include file="robot.xml"/>
+  <worldbody><geom name="floor" type="plane" size="0 0 0.05"/></worldbody>
+  {key}
+</mujoco>""")
+    return folder / "scene.xml"
+
+
+def test_a_scene_that_includes_its_robot_with_a_mesh_dir_and_its_keyframe_in_the_scene_loads(tmp_path):
+    from ppo_torchrl.robots.model import read_robot
+
+    robot = read_robot(write_robot(tmp_path / "tiny_robot"))
+    assert robot.name == "tiny" and robot.keyframe == "home"
+    assert robot.height == pytest.approx(0.3)
+    assert robot.corners == ("LF", "RF", "LH", "RH") and robot.heading == (1.0, 0.0)
+    thigh_plus_shank = 0.15 + 0.15
+    assert robot.leg_length == pytest.approx(thigh_plus_shank)
+
+
+def run_app(*args, cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "ppo_torchrl", *args], cwd=cwd, capture_output=True, text=True,
+                          timeout=600, env={**__import__("os").environ, "MUJOCO_GL": "egl"})
+
+
+@pytest.mark.parametrize("bad, expected", [
+    (dict(free=False), "has no free joint"),
+    (dict(feet=3), "env=legged needs four feet"),
+    (dict(site_actuator=True), "drives no joint"),
+])
+def test_a_bad_robot_is_one_error_line_and_exit_2_with_nothing_written(bad, expected, tmp_path):
+    model = write_robot(tmp_path / "bad", **bad)
+    before = sorted(p.name for p in tmp_path.rglob("*"))
+    done = run_app("env=legged", f"env.xml_file={model}", f"hydra.run.dir={tmp_path / 'run'}", cwd=tmp_path)
+    assert done.returncode == 2, done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error:") and expected in lines[0], done.stderr
+    assert sorted(p.name for p in tmp_path.rglob("*")) == before
+
+
+def test_an_unknown_keyframe_names_the_ones_the_model_has(tmp_path):
+    from ppo_torchrl.robots.model import read_robot
+
+    with pytest.raises(ConfigError, match=r"has no keyframe 'crouch' \(its keyframes: home\)"):
+        read_robot(write_robot(tmp_path / "r"), "crouch")
+
+
+def test_a_legged_run_is_named_by_its_model_and_says_what_was_read(tmp_path):
+    """One training batch of the recipe on the tiny robot: the run dir and the start line carry the model's name
+    (not scene.xml), the start line what was read; the env file derives the size-dependent values, and a
+    user's value for one of them is refused in one line."""
+    model = write_robot(tmp_path / "tiny_robot")
+    done = run_app("experiment=legged_trot", f"env.xml_file={model}", "collector.total_frames=256",
+                   "collector.frames_per_batch=256", "eval.every_frames=0", "eval.final_episodes=1", "logger=none",
+                   cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    runs = list((tmp_path / "outputs" / "runs").glob("*/*"))
+    assert len(runs) == 1 and runs[0].name.endswith("_legged_trot_tiny_seed1"), runs
+    assert "start: legged:tiny" in done.stderr and "robot tiny: " in done.stderr
+    assert "step 7.5 cm (0.25 l)" in done.stderr  # l = 0.3 m
+    evaluate = [sys.executable, "-m", "ppo_torchrl.evaluate", f"run={runs[0]}", "checkpoint=last", "episodes=1"]
+    plain = subprocess.run(evaluate, cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    assert plain.returncode == 0, plain.stderr
+    result = json.loads((runs[0] / "eval" / "eval.json").read_text())
+    assert result["step_height_mean"] == pytest.approx(0.075)  # no argument: the step of 0.25 l
+    sweep = subprocess.run(evaluate + ["heights=0,0.25l,0.3l"], cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    assert sweep.returncode == 0, sweep.stderr
+    rows = list(csv.DictReader(open(runs[0] / "eval" / "height_sweep.csv")))
+    assert [float(r["step_height_m"]) for r in rows] == pytest.approx([0.0, 0.075, 0.09])
+    refused = run_app("env=legged", f"env.xml_file={model}", "env.locomotion.target_speed=1.0", cwd=tmp_path)
+    assert refused.returncode == 2 and "env.legged.target_speed" in refused.stderr, refused.stderr
