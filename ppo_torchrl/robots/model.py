@@ -263,8 +263,14 @@ def _read_robot(path: str, keyframe: Optional[str]) -> Robot:
 
 def robot_label(path) -> str:
     """A run's name for a model file: the model's name (go1 for Menagerie's unitree_go1/scene.xml), else the
-    file's stem; never an error (run dirs are named before the config is checked)."""
-    path = Path(str(path))
+    file's stem; never an error (run dirs are named before the config is checked). Read once per process:
+    a run's summary names its env at every iteration."""
+    return _robot_label(str(path))
+
+
+@functools.lru_cache(maxsize=32)
+def _robot_label(path: str) -> str:
+    path = Path(path)
     try:
         return model_name(mujoco.MjModel.from_xml_path(str(path)), path)
     except Exception:  # noqa: BLE001 - a bad file is reported by the config check, with its reason
