@@ -11,6 +11,7 @@ composed and every value validated (each job of a sweep too), and the run or swe
 
 from __future__ import annotations
 
+import glob
 import itertools
 import os
 import sys
@@ -152,7 +153,12 @@ def check_resume(resume: str, overrides: list[str]) -> Path:
 
     run_dir = Path(resume).expanduser()
     if not run_dir.is_dir():
-        raise ConfigError(f"resume={run_dir}: no such directory; give the run dir of an earlier run")
+        from ppo_torchrl.rundir import ASIDE
+
+        moved = sorted(run_dir.parent.glob(f"{glob.escape(run_dir.name)}{ASIDE}*")) if run_dir.parent.is_dir() else []
+        hint = (f"; overwrite=true moved the run that was there to {moved[-1]}: resume={moved[-1]}" if moved
+                else "; give the run dir of an earlier run")
+        raise ConfigError(f"resume={run_dir}: no such directory{hint}")
     if not (run_dir / "checkpoints" / "last.pt").is_file():
         raise ConfigError(f"resume={run_dir} is not a ppo_torchrl run dir with a checkpoint: it needs "
                           "checkpoints/last.pt")

@@ -5,10 +5,12 @@
   temporary file of a write killed before it was listed), with no symlink anywhere.
 - A new run needs a dir that does not exist or is empty. A run dir is refused unless
   `overwrite=true`; a dir holding anything else is always refused (it is somebody's files).
-- `overwrite=true` checks the whole dir first, then moves the old run's listed files aside
-  (`.replaced/`) and deletes them only once the new run has started (`commit`): a command refused
-  after the claim (a bad `init_from`, a Ctrl-C during start-up) puts everything back (`rollback`),
-  and removes the dir it created. Only listed files are ever deleted, never a whole tree.
+- `overwrite=true` deletes nothing: it checks the whole dir, takes the lock of every run dir in it
+  (a sweep's jobs, a trial's seeds: one in use refuses the command, naming its process), then moves
+  the old run aside in one rename, to a sibling `<dir>.replaced-<time>` that the start of the new
+  run names (deleting it is the user's act). A command refused after that (a bad `init_from`, a
+  Ctrl-C during start-up) removes what it wrote and renames the old run back (`rollback`). A kill
+  at any instant leaves the old run whole, in its dir or in the sibling.
 - `resume=<dir>` continues the run in its own dir.
 - A lock on the dir itself (`flock` of its file descriptor: released even by kill -9, no file
   written) stops a second process from writing into a dir in use; the refusal names the holder.
@@ -23,6 +25,7 @@ import fcntl
 import json
 import os
 import re
+import sys
 import tempfile
 from pathlib import Path
 from typing import Dict, List, Optional
@@ -30,7 +33,8 @@ from typing import Dict, List, Optional
 from ppo_torchrl.errors import ConfigError, EnvironmentFault
 
 MANIFEST = ".ppo_torchrl.json"
-STASH = ".replaced"
+STASH = ".replaced"  # earlier versions moved an overwritten run's files here; one left by a kill is moved aside whole
+ASIDE = ".replaced-"  # overwrite=true: <dir>.replaced-<time> holds the run it replaced
 LEGACY_LOCK = ".lock"  # earlier versions locked a file of this name; a leftover one is ours
 # What the app writes, by place: `record` lists the files that match. logs/ is the loggers' (any name).
 RUN_FILES = (r"config\.yaml|metrics\.csv|summary\.json|report\.png|policy\.pt|error\.log|__main__\.log"
@@ -221,7 +225,7 @@ def in_use(directory: Path) -> bool:
 
 
 def claim(directory: Path, *, overwrite: bool = False, resume: bool = False, what: str = "run") -> Path:
-    """Check the dir (see the module doc) and lock it; with overwrite, move the old run aside until `commit`.
+    """Check the dir (see the module doc) and lock it; with overwrite, move the old run aside (one rename).
     what="job": a sweep's job dir, checked with its sweep dir; what Hydra wrote there is the job's own."""
     directory = Path(directory).expanduser()
     if directory.resolve() in _held:  # claimed already by this process (before Hydra started)
@@ -235,13 +239,38 @@ def claim(directory: Path, *, overwrite: bool = False, resume: bool = False, wha
     except ConfigError:
         release(directory)
         raise
+    aside = None
+    if overwrite and not resume and what != "job" and directory.is_dir() and (_files(directory) or _job_dirs(directory)):
+        aside = _move_aside(directory)
     lock(directory)
     if resume:
         return directory
-    stashed = _stash(directory, what) if overwrite else []
     before = set() if what == "job" else set(_files(directory))
-    _pending[directory.resolve()] = {"what": what, "created": created, "stashed": stashed, "before": before}
+    _pending[directory.resolve()] = {"what": what, "created": created, "aside": aside, "before": before}
     return directory
+
+
+def _move_aside(directory: Path) -> Path:
+    """Rename `directory` to a new sibling <name>.replaced-<time>, once every run dir inside it is locked
+    by this process (one in use by another refuses, naming it); the locks go with the moved dirs."""
+    import time
+
+    inner = [Path(root) for root, _, files in os.walk(directory) if MANIFEST in files and Path(root) != directory]
+    try:
+        for run in inner:
+            lock(run)
+        stamp = time.strftime("%Y%m%d-%H%M%S")
+        aside = directory.with_name(f"{directory.name}{ASIDE}{stamp}")
+        n = 1
+        while aside.exists():
+            n += 1
+            aside = directory.with_name(f"{directory.name}{ASIDE}{stamp}-{n}")
+        os.rename(directory, aside)
+    finally:
+        for run in inner:
+            release(run)
+        release(directory)
+    return aside
 
 
 def _missing_parents(directory: Path) -> List[Path]:
@@ -250,25 +279,6 @@ def _missing_parents(directory: Path) -> List[Path]:
         missing.append(path)
         path = path.parent
     return missing
-
-
-def _stash(directory: Path, what: str) -> List[str]:
-    """Move the old run's (or sweep's) listed files into <dir>/.replaced, keeping their paths."""
-    moved = []
-    sources = [directory] + (_job_dirs(directory) if what == "sweep" else [])
-    for source in sources:
-        names = (listed(source) or []) + [f for f in _files(source) if UNLISTED_OK.match(f)]
-        names += [MANIFEST] if (source / MANIFEST).exists() else []
-        prefix = "" if source == directory else f"{source.name}/"
-        for name in dict.fromkeys(names):
-            if not (source / name).exists():
-                continue
-            target = directory / STASH / prefix / name
-            target.parent.mkdir(parents=True, exist_ok=True)
-            os.replace(source / name, target)
-            moved.append(prefix + name)
-    _prune_empty(directory)
-    return moved
 
 
 def _prune_empty(directory: Path) -> None:
@@ -285,35 +295,27 @@ def _prune_empty(directory: Path) -> None:
 
 def source(path: Path) -> Path:
     """Where `path` is now: a path into a dir whose old run overwrite=true moved aside (init_from=<that run>)
-    reads the moved files until `commit`."""
+    reads the moved files."""
     path = Path(path).expanduser().resolve()
     for key, state in _pending.items():
-        if state["stashed"] and (path == key or key in path.parents):
-            return key / STASH / path.relative_to(key)
+        if state["aside"] and (path == key or key in path.parents):
+            return state["aside"].resolve() / path.relative_to(key)
     return path
 
 
 def commit(directory: Path) -> None:
-    """The new run has started: delete the files it replaced (each listed file, one by one) and list its own."""
+    """The new run has started: it keeps its dir (the run it replaced stays where overwrite moved it, named
+    here); list its own files."""
     directory = Path(directory)
     state = _pending.pop(directory.resolve(), None)
-    if state is not None and state["stashed"]:
-        stash = directory / STASH
-        for name in state["stashed"]:
-            try:
-                (stash / name).unlink()
-            except FileNotFoundError:
-                pass
-        _prune_empty(stash)
-        try:
-            stash.rmdir()
-        except OSError:
-            pass
+    if state is not None and state["aside"]:
+        print(f"overwrite=true: the {state['what']} that was in {directory} is now {state['aside']} (delete it when "
+              "you no longer need it)", file=sys.stderr, flush=True)
     record(directory)
 
 
 def rollback(directory: Optional[Path] = None) -> None:
-    """A claimed dir whose command failed before `commit`: remove what it wrote, put back what it moved."""
+    """A claimed dir whose command failed before `commit`: remove what it wrote, put back what it moved aside."""
     for key in ([Path(directory).resolve()] if directory is not None else list(_pending)):
         state = _pending.pop(key, None)
         if state is None:
@@ -323,17 +325,14 @@ def rollback(directory: Optional[Path] = None) -> None:
             for name in _files(key):
                 if name not in state["before"]:
                     (key / name).unlink()
-            for name in state["stashed"]:
-                (key / name).parent.mkdir(parents=True, exist_ok=True)
-                os.replace(key / STASH / name, key / name)
-            if (key / STASH).exists():
-                _prune_empty(key / STASH)
-                (key / STASH).rmdir()
             _prune_empty(key)
+            if state["aside"]:
+                key.rmdir()  # only this command's (now empty) dir: the old run goes back in one rename
+                os.rename(state["aside"], key)
             for path in state["created"]:
                 path.rmdir()
         except (OSError, ConfigError):
-            pass  # best effort: what is left is named by the next claim's check
+            pass  # best effort: what is left is named by the next claim's check (the old run stays whole)
 
 
 def finish() -> None:

@@ -109,10 +109,14 @@ def test_overwrite_with_a_rejected_init_from_keeps_the_old_run(finished_run, tmp
 
 def test_overwrite_may_start_from_the_run_it_replaces(finished_run, tmp_path):
     run = copy_of(finished_run, tmp_path)
+    old = tree_digest(run)
     result = run_cli(*RUN, "overwrite=true", f"init_from={run}", "seed=7", f"hydra.run.dir={run}")
     assert result.returncode == 0, result.stderr[-1000:]
     assert json.loads((run / "summary.json").read_text())["seed"] == 7
-    assert not (run / rundir.STASH).exists() and rundir.foreign_files(run) == []
+    assert rundir.foreign_files(run) == []
+    aside = list(tmp_path.glob("run.replaced-*"))  # the old run, moved aside whole: nothing deleted
+    assert len(aside) == 1 and tree_digest(aside[0]) == old
+    assert "the run that was in" in result.stderr and str(aside[0]) in result.stderr
 
 
 def test_resume_and_evaluate_take_the_config_from_the_checkpoint(finished_run, tmp_path):
