@@ -149,16 +149,18 @@ def check_resume(resume: str, overrides: list[str]) -> Path:
     """`resume=<dir>` must be a run dir with a checkpoint that has frames left to train."""
     from ppo_torchrl import checkpoint
     from ppo_torchrl.config import resume_config
+    from ppo_torchrl.rundir import ASIDE, shipped
     from ppo_torchrl.validation import check_frames_left, validate_config
 
     run_dir = Path(resume).expanduser()
     if not run_dir.is_dir():
-        from ppo_torchrl.rundir import ASIDE
-
         moved = sorted(run_dir.parent.glob(f"{glob.escape(run_dir.name)}{ASIDE}*")) if run_dir.parent.is_dir() else []
         hint = (f"; overwrite=true moved the run that was there to {moved[-1]}: resume={moved[-1]}" if moved
                 else "; give the run dir of an earlier run")
         raise ConfigError(f"resume={run_dir}: no such directory{hint}")
+    if shipped(run_dir):
+        raise ConfigError(f"resume={run_dir}: a shipped zoo policy is read-only; train on from it in a dir of your own "
+                          f"with init_from={run_dir}")
     if not (run_dir / "checkpoints" / "last.pt").is_file():
         raise ConfigError(f"resume={run_dir} is not a ppo_torchrl run dir with a checkpoint: it needs "
                           "checkpoints/last.pt")

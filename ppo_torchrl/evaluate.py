@@ -506,7 +506,7 @@ def main(argv: list[str]) -> dict:
     from ppo_torchrl.checkpoint import check_spec, load_policy
     from ppo_torchrl.cli import parse_args, resolve_run
     from ppo_torchrl.envs import env_spec
-    from ppo_torchrl.rundir import atomic_write_json, is_run, record, unwritable
+    from ppo_torchrl.rundir import atomic_write_json, check_replaceable, is_run, output_dir_for, record, unwritable
 
     usage = ("python -m ppo_torchrl.evaluate run=<run dir> [checkpoint=best|last|<file>] [episodes=10] [video=false] "
              "[video_episodes=0] [video_length=<s>] [seed=0] [heights=<m,m,...> [out=<dir>]] [env.<key>=<value> ...]")
@@ -546,10 +546,13 @@ def main(argv: list[str]) -> dict:
     if heights and args["video"]:
         raise ConfigError("video=true films one evaluation; leave it out of a heights= sweep")
     run_dir = resolve_run(args["run"])  # run=latest[/<env>]: the newest run dir under outputs/
-    out_dir = Path(args["out"]) if args["out"] else run_dir / "eval"
+    out_dir = Path(args["out"]) if args["out"] else output_dir_for(run_dir, run_dir / "eval")  # zoo: outputs/zoo/<name>
     why = unwritable(out_dir)  # before any episode runs
     if why:
         raise ConfigError(f"cannot write the eval's files in {out_dir}: {why}; give a writable dir with out=<dir>")
+    video = out_dir / f"{args['checkpoint'] if args['checkpoint'] in ('best', 'last') else 'checkpoint'}.mp4"
+    writes = [out_dir / name for name in SWEEP_FILES] if heights else [out_dir / "eval.json"] + [video] * args["video"]
+    check_replaceable(run_dir, writes)  # a file there that the app did not write is left alone: one line
     cfg, ac, state = load_policy(run_dir, args["checkpoint"])
     if overrides:
         cfg = apply_overrides(cfg, overrides)
@@ -563,9 +566,8 @@ def main(argv: list[str]) -> dict:
         print(f"{label}: height sweep over {args['episodes']} episodes per height: "
               f"{out_dir / SWEEP_FILES[0]}, {out_dir / SWEEP_FILES[1]}")
         if is_run(run_dir):
-            record(run_dir)
+            record(run_dir, writes)
         return {"heights": rows}
-    video = out_dir / f"{args['checkpoint'] if args['checkpoint'] in ('best', 'last') else 'checkpoint'}.mp4"
     result = evaluate_policy(cfg, ac, obs_stats, args["episodes"], seed=args["seed"],
                              video_path=video if args["video"] else None, progress=True,
                              video_episodes=video_episodes, video_length=video_length)
@@ -573,7 +575,7 @@ def main(argv: list[str]) -> dict:
                   episodes=args["episodes"], video=result.get("video"), overrides=overrides)
     atomic_write_json(out_dir / "eval.json", result)
     if is_run(run_dir):
-        record(run_dir)
+        record(run_dir, writes)
     print(f"{label}: return {result['return_mean']:.1f} +- "
           f"{result['return_std']:.1f}, length {result['length_mean']:.0f} +- {result['length_std']:.0f} "
           f"over {args['episodes']} episodes" + motion_line(result) + ("; " + video_line(result["video"])

@@ -63,22 +63,25 @@ def export_policy(cfg, ac: ActorCritic, obs_stats: Optional[dict], path: Path) -
 def main(argv: list[str]) -> Path:
     from ppo_torchrl.checkpoint import load_policy
     from ppo_torchrl.cli import parse_args, resolve_run
-    from ppo_torchrl.rundir import is_run, record, unwritable
+    from ppo_torchrl.rundir import check_replaceable, is_run, output_dir_for, record, unwritable
 
     usage = "python -m ppo_torchrl.export run=<run dir> [checkpoint=best|last|<file>]"
-    help = {"run": "the run dir whose policy is exported (or latest, latest/<env>); writes <run dir>/policy.pt",
+    help = {"run": "the run dir whose policy is exported (or latest, latest/<env>); writes <run dir>/policy.pt (for a "
+                   "shipped zoo/ folder: outputs/zoo/<name>/policy.pt)",
             "checkpoint": "best, last, or a checkpoint file"}
     about = ("Writes the policy as TorchScript: a raw observation in, the deterministic action within the bounds\n"
              "out, normalization baked in; it runs with torch alone: torch.jit.load('policy.pt')(obs).")
     args = parse_args(argv, {"run": None, "checkpoint": "best"}, usage, help, about)
     run_dir = resolve_run(args["run"])  # run=latest[/<env>]: the newest run dir under outputs/
+    target = output_dir_for(run_dir, run_dir) / "policy.pt"  # a shipped zoo folder: outputs/zoo/<name>/policy.pt
+    check_replaceable(run_dir, [target])  # a policy.pt the app did not write is left alone
     cfg, ac, state = load_policy(run_dir, args["checkpoint"])
-    why = unwritable(run_dir)
+    why = unwritable(target.parent)
     if why:
-        raise ConfigError(f"cannot write {run_dir / 'policy.pt'}: {why}; copy the run dir somewhere writable")
-    path = export_policy(cfg, ac, state["normalization"]["obs"], run_dir / "policy.pt")
+        raise ConfigError(f"cannot write {target}: {why}; copy the run dir somewhere writable")
+    path = export_policy(cfg, ac, state["normalization"]["obs"], target)
     if is_run(run_dir):
-        record(run_dir)
+        record(run_dir, [path])
     print(f"exported {cfg.env.id} policy ({args['checkpoint']}, {state['frames']} frames) to {path}")
     return path
 

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Dict, List
 
 from ppo_torchrl.errors import ConfigError
-from ppo_torchrl.rundir import is_run, record, unwritable
+from ppo_torchrl.rundir import check_replaceable, is_run, record, unwritable
 
 PANELS = [
     ("train/entropy", "policy entropy"),
@@ -229,8 +229,10 @@ def main(argv: List[str]) -> List[Path]:
     if why:
         raise ConfigError(f"cannot write the report into {target}: {why}; copy the dir somewhere writable and run it there")
     if (target / "metrics.csv").is_file():
+        check_replaceable(target, [target / "report.png"])  # a report.png the app did not write is left alone
         outputs = [plot_run(target)]
     elif (target / "multirun.yaml").is_file() or any(target.glob("*/.hydra")) or (target / "trial.json").is_file():
+        check_replaceable(target, [target / f"sweep_report.{ext}" for ext in ("png", "csv", "md")])
         outputs = plot_sweep(target)  # a trial_seeds run is a sweep of its seed<k>/ runs
     else:
         raise ConfigError(f"{target} is neither a run dir (metrics.csv) nor a sweep dir (multirun.yaml) nor a "
@@ -238,7 +240,7 @@ def main(argv: List[str]) -> List[Path]:
     for out in outputs:
         print(f"wrote {out}")
     if is_run(target):
-        record(target)
+        record(target, outputs)
     return outputs
 
 

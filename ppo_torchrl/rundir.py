@@ -27,6 +27,7 @@ import os
 import re
 import sys
 import tempfile
+import time
 from pathlib import Path
 from typing import Dict, List, Optional
 
@@ -46,6 +47,8 @@ OWNED = re.compile(rf"^(?:{RUN_FILES}|multirun\.yaml|optimization_results\.yaml|
 # Listed or not, these are the app's in an app's dir: a checkpoint or a temp file of a write cut short.
 UNLISTED_OK = re.compile(r"^(?:(?:seed\d+/)?checkpoints/(?:last|best|frames_\d+)\.pt|(?:.+/)?\.[^/]+\.tmp)$")
 
+ZOO = Path(__file__).resolve().parent.parent / "zoo"  # the shipped policies: read-only to every command
+_BEGAN_NS = time.time_ns()  # this process's start: `record` lists only the files written since
 _held: Dict[Path, int] = {}  # dir -> open descriptor holding its lock, for the life of the process
 _pending: Dict[Path, dict] = {}  # claimed dirs not yet committed: what rollback() undoes
 
@@ -96,23 +99,71 @@ def listed(directory: Path) -> Optional[List[str]]:
     """The manifest's files, or None when the dir has no (readable) manifest."""
     try:
         data = json.loads((Path(directory) / MANIFEST).read_text())
-        return list(data["files"])
+        files = data["files"]
+        if not isinstance(files, list):
+            return None
+        return [f for f in files if isinstance(f, str)]  # an edited manifest's other entries name nothing
     except (OSError, ValueError, KeyError, TypeError):
         return None
 
 
-def record(directory: Path) -> None:
-    """Add to the manifest the files of the app's kinds now in `directory` (called as the app writes)."""
+def record(directory: Path, files: Optional[List[Path]] = None) -> None:
+    """Add to the manifest the files this command wrote in `directory`: `files` (the paths it wrote), or
+    without them the files of the app's kinds (RUN_FILES...) written since this process began (a new run's
+    or a resume's: the trainer, Hydra and the loggers write there). A file that was there before the
+    command, a user's, is never listed by it."""
     directory = Path(directory)
     if not directory.is_dir():
         return
-    files = set(listed(directory) or [])
-    try:
-        files.update(f for f in _files(directory) if OWNED.match(f))
-    except ConfigError:  # a symlink put there by hand: listed files stay as they were
-        pass
-    files = sorted(f for f in files if (directory / f).exists())
-    atomic_write_json(directory / MANIFEST, {"app": "ppo_torchrl", "files": files})
+    listed_now = set(listed(directory) or [])
+    if files is not None:
+        root = directory.resolve()
+        written = {Path(os.path.relpath(Path(f).resolve(), root)).as_posix() for f in files}
+        listed_now.update(f for f in written if not f.startswith("../") and f != "..")
+    else:
+        try:
+            listed_now.update(f for f in _files(directory) if OWNED.match(f)
+                              and (directory / f).stat().st_mtime_ns >= _BEGAN_NS)
+        except ConfigError:  # a symlink put there by hand: listed files stay as they were
+            pass
+    kept = sorted(f for f in listed_now if isinstance(f, str) and _inside(directory, f) and (directory / f).is_file())
+    atomic_write_json(directory / MANIFEST, {"app": "ppo_torchrl", "files": kept})
+
+
+def _inside(directory: Path, name: str) -> bool:
+    """A manifest entry names a file inside its dir: relative, no '..', no symlink on the way."""
+    path = Path(name)
+    if path.is_absolute() or ".." in path.parts:
+        return False
+    here = Path(directory)
+    for part in path.parts:
+        here = here / part
+        if here.is_symlink():
+            return False
+    return True
+
+
+def check_replaceable(directory: Path, paths: List[Path]) -> None:
+    """Before evaluate, export or report write `paths`: in a run dir, one that would replace a file this app did
+    not write (a file there that the manifest does not list) or go through a symlink is one ConfigError line."""
+    directory = Path(directory)
+    if not is_run(directory):
+        return
+    ours = set(listed(directory) or [])
+    for path in paths:
+        path = Path(path)
+        if not str(path.absolute()).startswith(str(directory.absolute()) + os.sep):
+            continue
+        rel = path.absolute().relative_to(directory.absolute())
+        here = directory
+        for part in rel.parts:
+            here = here / part
+            if here.is_symlink():
+                raise ConfigError(f"{here} is a symlink, which this app never writes through; give another "
+                                  "output dir (out=<dir>) or remove the link yourself")
+        if path.exists() and rel.as_posix() not in ours:
+            raise ConfigError(f"{path} is not a file this app wrote (the run's {MANIFEST} does not list it); it is "
+                              "left as it is: move it, or write elsewhere (out=<dir> for evaluate)")
 
 
 def foreign_files(directory: Path) -> List[str]:
@@ -203,6 +254,18 @@ def lock(directory: Path) -> None:
     _held[directory] = fd
 
 
+def shipped(directory: Path) -> bool:
+    """A folder of the shipped zoo (or inside one): commands read it and write their files elsewhere."""
+    path = Path(directory).expanduser().resolve()
+    return path == ZOO or ZOO in path.parents
+
+
+def output_dir_for(directory: Path, default: Path) -> Path:
+    """Where a command writes the files it makes for the run in `directory`: `default` (inside the run dir),
+    or outputs/zoo/<name>/ for a shipped zoo folder, which stays as it was shipped."""
+    return Path("outputs") / "zoo" / Path(directory).resolve().name if shipped(directory) else default
+
+
 def in_use(directory: Path) -> bool:
     """Another process holds the dir's lock (a run still training there); leaves the lock as it was."""
     directory = Path(directory).resolve()
@@ -253,8 +316,6 @@ def claim(directory: Path, *, overwrite: bool = False, resume: bool = False, wha
 def _move_aside(directory: Path) -> Path:
     """Rename `directory` to a new sibling <name>.replaced-<time>, once every run dir inside it is locked
     by this process (one in use by another refuses, naming it); the locks go with the moved dirs."""
-    import time
-
     inner = [Path(root) for root, _, files in os.walk(directory) if MANIFEST in files and Path(root) != directory]
     try:
         for run in inner:

@@ -89,3 +89,81 @@ def test_resume_of_a_dir_that_overwrite_moved_names_where_the_run_went(finished_
     moved = copy_of(finished_run, tmp_path, "run.replaced-20261127-101010")
     code, lines = refused([f"resume={tmp_path / 'run'}"], capsys)
     assert code == 2 and len(lines) == 1 and f"resume={moved}" in lines[0], lines
+
+
+def manifest(run: Path) -> list:
+    return json.loads((run / ".ppo_torchrl.json").read_text())["files"]
+
+
+def test_evaluate_lists_only_what_it_wrote_so_overwrite_never_takes_a_users_file(finished_run, tmp_path, capsys):
+    """The issue's case: a user's csv in eval/, then evaluate, then overwrite=true: the csv is not listed, so the
+    overwrite is refused in one line naming it, and every byte stays."""
+    run = copy_of(finished_run, tmp_path)
+    (run / "eval").mkdir(exist_ok=True)
+    (run / "eval" / "paper_numbers.csv").write_text("1\n")
+    result = run_cli(f"run={run}", "episodes=1", module="ppo_torchrl.evaluate")
+    assert result.returncode == 0, result.stderr[-1500:]
+    assert "eval/eval.json" in manifest(run) and "eval/paper_numbers.csv" not in manifest(run)
+    before = tree_digest(tmp_path)
+    code, lines = refused([*RUN, "overwrite=true", f"hydra.run.dir={run}"], capsys)
+    assert code == 2 and len(lines) == 1 and "eval/paper_numbers.csv" in lines[0], lines
+    assert tree_digest(tmp_path) == before
+
+
+@pytest.mark.parametrize("command, target", [
+    (["episodes=1"], "eval/eval.json"),
+    ([], "policy.pt"),
+    ([], "report.png"),
+])
+def test_evaluate_export_and_report_never_replace_a_file_the_app_did_not_write(finished_run, tmp_path, command,
+                                                                                target):
+    run = copy_of(finished_run, tmp_path)
+    listed_before = [f for f in manifest(run) if f != target]
+    (run / ".ppo_torchrl.json").write_text(json.dumps({"app": "ppo_torchrl", "files": listed_before}))
+    (run / target).parent.mkdir(exist_ok=True)
+    (run / target).write_text("the user's")
+    before = tree_digest(tmp_path)
+    module = {"policy.pt": "ppo_torchrl.export", "report.png": "ppo_torchrl.report"}.get(target, "ppo_torchrl.evaluate")
+    args = [str(run)] if target == "report.png" else [f"run={run}", *command]
+    result = run_cli(*args, module=module)
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 2 and len(lines) == 1 and "is not a file this app wrote" in lines[0], result.stderr
+    assert tree_digest(tmp_path) == before
+
+
+def test_evaluate_never_writes_through_a_symlinked_eval_dir(finished_run, tmp_path):
+    run = copy_of(finished_run, tmp_path)
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    (elsewhere / "eval.json").write_text("the user's")
+    (run / "eval").symlink_to(elsewhere)
+    result = run_cli(f"run={run}", "episodes=1", module="ppo_torchrl.evaluate")
+    assert result.returncode == 2 and "is a symlink" in result.stderr, result.stderr[-1500:]
+    assert (elsewhere / "eval.json").read_text() == "the user's"
+
+
+def test_a_manifest_with_entries_that_are_not_paths_is_read_as_naming_nothing(finished_run, tmp_path):
+    """Non-string, absolute and '../' entries name no file of the run: evaluate works and lists what it wrote."""
+    run = copy_of(finished_run, tmp_path)
+    (tmp_path / "outside.txt").write_text("the user's")
+    files = manifest(run) + [3, {"a": 1}, None, "../outside.txt", str(tmp_path / "outside.txt")]
+    (run / ".ppo_torchrl.json").write_text(json.dumps({"app": "ppo_torchrl", "files": files}))
+    result = run_cli(f"run={run}", "episodes=1", module="ppo_torchrl.evaluate")
+    assert result.returncode == 0, result.stderr[-1500:]
+    assert all(isinstance(f, str) and not f.startswith(("/", "..")) for f in manifest(run))
+    assert (tmp_path / "outside.txt").read_text() == "the user's"
+
+
+def test_shipped_zoo_folders_are_read_only_to_every_command(tmp_path, capsys):
+    """evaluate and export of a zoo policy write under outputs/zoo/<name>/ in the working dir; resume of one is
+    refused in one line naming init_from."""
+    zoo = rundir.ZOO / "Hopper-v4"
+    before = tree_digest(zoo)
+    result = run_cli(f"run={zoo}", "episodes=1", module="ppo_torchrl.evaluate", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr[-1500:]
+    assert (tmp_path / "outputs" / "zoo" / "Hopper-v4" / "eval.json").is_file()
+    result = run_cli(f"run={zoo}", module="ppo_torchrl.export", cwd=tmp_path)
+    assert result.returncode == 0 and (tmp_path / "outputs" / "zoo" / "Hopper-v4" / "policy.pt").is_file()
+    code, lines = refused([f"resume={zoo}", "collector.total_frames=2000000"], capsys)
+    assert code == 2 and len(lines) == 1 and f"init_from={zoo}" in lines[0], lines
+    assert tree_digest(zoo) == before
