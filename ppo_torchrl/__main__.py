@@ -18,7 +18,7 @@ import sys
 from pathlib import Path
 
 from ppo_torchrl import signals
-from ppo_torchrl.errors import ConfigError, guarded
+from ppo_torchrl.errors import ConfigError, Interrupted, guarded
 
 if __name__ == "__main__":
     signals.install()  # from here on a Ctrl-C or SIGTERM is one line and exit 130 / 143, imports included
@@ -76,8 +76,25 @@ def _run_job(cfg) -> float:
         if cfg.trial_seeds:
             return _run_seeds(cfg, run_dir)
         return objective(train(cfg, run_dir, state, next_steps=not multirun))  # a sweep ends with its report command
+    except (Interrupted, KeyboardInterrupt):
+        if multirun:
+            fail_running_trial(HydraConfig.get().sweeper)
+        raise
     finally:
         rundir.rollback(run_dir)  # a job refused before it started training leaves its dir as it was
+
+
+def fail_running_trial(sweeper) -> None:
+    """A signal in a trial of a stored Optuna study: the study's running trial (this job's: the sweeper runs one
+    at a time) is marked failed now, so the stored study never shows it running."""
+    storage, name = sweeper.get("storage"), sweeper.get("study_name")
+    if not (storage and name and "optuna" in str(sweeper.get("_target_", ""))):
+        return
+    import optuna
+
+    study = optuna.load_study(study_name=name, storage=storage)
+    for trial in study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.RUNNING,)):
+        study.tell(trial.number, state=optuna.trial.TrialState.FAIL)
 
 
 def _run_seeds(cfg, run_dir: Path) -> float:
@@ -145,6 +162,13 @@ def check_env_override(overrides: list[str]) -> None:
                     )
 
 
+def _read(path: Path) -> str:
+    try:
+        return path.read_text()
+    except (OSError, UnicodeDecodeError):
+        return ""
+
+
 def check_resume(resume: str, overrides: list[str]) -> Path:
     """`resume=<dir>` must be a run dir with a checkpoint that has frames left to train."""
     from ppo_torchrl import checkpoint
@@ -162,6 +186,12 @@ def check_resume(resume: str, overrides: list[str]) -> Path:
         raise ConfigError(f"resume={run_dir}: a shipped zoo policy is read-only; train on from it in a dir of your own "
                           f"with init_from={run_dir}")
     if not (run_dir / "checkpoints" / "last.pt").is_file():
+        stopped = [d for d in sorted(run_dir.glob("seed*")) if (d / "checkpoints" / "last.pt").is_file()
+                   and '"status": "finished"' not in _read(d / "summary.json")]
+        if (run_dir / "trial.json").is_file() or stopped:  # a trial_seeds run: its seeds are runs of their own
+            then = (f"resume={stopped[0]} continues its stopped seed" if stopped else "its seeds are all finished")
+            raise ConfigError(f"resume={run_dir} is a trial of several seeds (trial.json), each seed a run of its own: "
+                              f"{then}; overwrite=true starts the trial again")
         raise ConfigError(f"resume={run_dir} is not a ppo_torchrl run dir with a checkpoint: it needs "
                           "checkpoints/last.pt")
     state = checkpoint.load(run_dir / "checkpoints" / checkpoint.LAST)

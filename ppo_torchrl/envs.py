@@ -197,12 +197,15 @@ def gym_make_kwargs(env_cfg, render_mode: Optional[str] = None, evaluation: bool
     if kwargs:
         kwargs["evaluation"] = evaluation
     else:
-        from ppo_torchrl.config import TerrainConfig
+        from ppo_torchrl.config import LocomotionConfig, TerrainConfig
 
         terrain, default = env_cfg.get("terrain") or {}, TerrainConfig()
-        changed = [k for k in terrain if k in TERRAIN_KNOBS and _plain(terrain[k]) != getattr(default, k)]
-        if changed:
-            raise ConfigError(f"env.terrain.{changed[0]} works on MJCF robots (env=mjcf, env=quadruped_step), "
+        changed = [f"terrain.{k}" for k in terrain if k in TERRAIN_KNOBS and _plain(terrain[k]) != getattr(default, k)]
+        loco, loco_default = env_cfg.get("locomotion") or {}, LocomotionConfig()
+        changed += [f"locomotion.{k}" for k in loco if _plain(loco[k]) != getattr(loco_default, k, None)]
+        changed += ["legged"] if env_cfg.get("legged") is not None else []
+        if changed:  # a key this env does not read is refused, never ignored
+            raise ConfigError(f"env.{changed[0]} works on MJCF robots (env=mjcf, env=legged, env=quadruped_step), "
                               f"not env.id={env_cfg.id}")
     kwargs.update(env_cfg.make_kwargs or {})
     if env_cfg.max_episode_steps is not None:

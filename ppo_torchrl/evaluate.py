@@ -402,6 +402,22 @@ def apply_overrides(cfg, overrides: list[str]):
     return cfg
 
 
+def check_same_env(run_dir: Path, cfg, checkpoint: str) -> None:
+    """A checkpoint of another env is not filed in this run's dir: one ConfigError line (out=<dir> writes it
+    elsewhere). The run's env is its config.yaml's; a run without a readable one is not checked."""
+    from omegaconf import OmegaConf
+
+    try:
+        own = OmegaConf.load(Path(run_dir) / "config.yaml").env
+        own_label = env_label(own)
+    except Exception:  # noqa: BLE001 - no config.yaml, or a damaged one: nothing to compare with
+        return
+    if own_label != env_label(cfg.env):
+        raise ConfigError(f"checkpoint={checkpoint} is a {env_label(cfg.env)} policy and run={run_dir} a {own_label} "
+                          f"run: its results would be filed as this run's; evaluate it with run=<its own run dir>, "
+                          "or give out=<dir>")
+
+
 def parse_heights(text: str) -> list[tuple]:
     """heights=0,0.05,0.1 (m) or, for env=legged, in leg lengths: 0,0.2l,0.25l,0.3l. [(value, in leg lengths)]."""
     example = "e.g. 0,0.05,0.1,0.15,0.2 (m) or, for env=legged, 0,0.2l,0.25l,0.3l (leg lengths)"
@@ -554,6 +570,8 @@ def main(argv: list[str]) -> dict:
     writes = [out_dir / name for name in SWEEP_FILES] if heights else [out_dir / "eval.json"] + [video] * args["video"]
     check_replaceable(run_dir, writes)  # a file there that the app did not write is left alone: one line
     cfg, ac, state = load_policy(run_dir, args["checkpoint"])
+    if not args["out"]:
+        check_same_env(run_dir, cfg, args["checkpoint"])
     if overrides:
         cfg = apply_overrides(cfg, overrides)
         check_spec(state, env_spec(cfg.env), cfg.env.id)

@@ -32,17 +32,31 @@ PANELS = [
 ]
 
 
-def read_metrics(path: Path) -> Dict[str, List[float]]:
-    """Columns of metrics.csv as float lists; empty cells become NaN."""
-    with open(path, newline="") as f:
-        rows = list(csv.DictReader(f))
+RUN_COLUMNS = ("frames", "train/episode_return", "train/return_last100", "eval/return_mean", "eval/return_std")
+
+
+def read_metrics(path: Path, required=("frames",)) -> Dict[str, List[float]]:
+    """Columns of metrics.csv as float lists; empty cells become NaN. A file that is not the app's table (not
+    text, no header, a `required` column missing) is one ConfigError line."""
+    damaged = (f"{path} is damaged (a row that is not numbers); restore it, or delete the damaged rows, and run "
+               "the report again")
+    try:
+        with open(path, newline="") as f:
+            rows = list(csv.DictReader(f))
+    except (UnicodeDecodeError, csv.Error):
+        raise ConfigError(f"{path} is not a metrics table (not CSV text); restore it from the run, or report another "
+                          "run") from None
     if not rows:
         raise ConfigError(f"{path} has no rows yet: the run has not finished an iteration")
     try:
-        return {key: [float(r[key]) if r[key] not in ("", None) else float("nan") for r in rows] for key in rows[0]}
+        columns = {key: [float(r[key]) if r[key] not in ("", None) else float("nan") for r in rows] for key in rows[0]}
     except (TypeError, ValueError, KeyError):
-        raise ConfigError(f"{path} is damaged (a row that is not numbers); restore it, or delete the damaged rows, "
-                          "and run the report again") from None
+        raise ConfigError(damaged) from None
+    missing = [key for key in required if key not in columns]
+    if missing:
+        raise ConfigError(f"{path} has no column {missing[0]}: it is not a metrics.csv this app wrote; restore it "
+                          "from the run, or report another run")
+    return columns
 
 
 def last100_label(m: Dict[str, List[float]]) -> str:
@@ -73,7 +87,7 @@ def run_figure(run_dir: Path):
     metrics_path = Path(run_dir) / "metrics.csv"
     if not metrics_path.is_file():
         raise ConfigError(f"{run_dir} is not a ppo_torchrl run dir (no metrics.csv)")
-    m = read_metrics(metrics_path)
+    m = read_metrics(metrics_path, RUN_COLUMNS)
     frames = np.asarray(m["frames"])
     fig = plt.figure(figsize=(14, 9), constrained_layout=True)
     grid = fig.add_gridspec(3, 3)
@@ -98,8 +112,11 @@ def run_figure(run_dir: Path):
     if summary.exists():
         import json
 
-        s = json.loads(summary.read_text())
-        title = f"{s['env']}  seed {s['seed']}  {s.get('loss', '')}/{s.get('policy', '')}  {s['frames']:,} frames"
+        try:
+            s = json.loads(summary.read_text())
+            title = f"{s['env']}  seed {s['seed']}  {s.get('loss', '')}/{s.get('policy', '')}  {int(s['frames']):,} frames"
+        except (OSError, ValueError, TypeError, KeyError, AttributeError):  # a damaged summary: the dir's name
+            pass
     fig.suptitle(title)
     return fig
 
@@ -130,8 +147,13 @@ def sweep_runs(sweep_dir: Path):
         if not summary.exists():
             skipped.append(f"skipped {job.name}: no summary.json (failed before its first iteration)")
             continue
-        s = json.loads(summary.read_text())
-        if s.get("status") != "finished":
+        try:
+            s = json.loads(summary.read_text())
+            status = s.get("status")
+        except (OSError, ValueError, AttributeError):
+            skipped.append(f"skipped {job.name}: its summary.json cannot be read")
+            continue
+        if status != "finished":
             skipped.append(f"skipped {job.name}: status {s.get('status')} at {s.get('frames')} frames")
             continue
         from omegaconf import OmegaConf

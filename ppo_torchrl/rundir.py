@@ -167,13 +167,29 @@ def check_replaceable(directory: Path, paths: List[Path]) -> None:
 
 
 def foreign_files(directory: Path) -> List[str]:
-    """The files of `directory` that the app did not write ([] for an app's dir; all of them without a manifest)."""
+    """The files of `directory` that the app did not write ([] for an app's dir; all of them without a manifest).
+    A run dir inside it (a trial's seed<k>/) answers for its own files by its own manifest: a seed stopped
+    midway is the app's even before the trial's manifest lists it."""
     files = _files(directory)
     ours = listed(directory)
     if ours is None:
         return [f for f in files if f != LEGACY_LOCK]
     ours = set(ours)
-    return [f for f in files if f not in ours and not UNLISTED_OK.match(f)]
+    nested = {}  # a run dir inside (relative) -> its listed files
+    for root, _, names in os.walk(directory):
+        if MANIFEST in names and Path(root) != Path(directory):
+            nested[Path(root).relative_to(directory).as_posix()] = set(listed(root) or [])
+
+    def own(name: str) -> bool:
+        if name in ours or UNLISTED_OK.match(name):
+            return True
+        for inner, listed_there in nested.items():
+            if name.startswith(inner + "/"):
+                rest = name[len(inner) + 1:]
+                return rest == MANIFEST or rest in listed_there or bool(UNLISTED_OK.match(rest))
+        return False
+
+    return [f for f in files if not own(f)]
 
 
 def _job_dirs(directory: Path) -> List[Path]:

@@ -167,3 +167,51 @@ def test_shipped_zoo_folders_are_read_only_to_every_command(tmp_path, capsys):
     code, lines = refused([f"resume={zoo}", "collector.total_frames=2000000"], capsys)
     assert code == 2 and len(lines) == 1 and f"init_from={zoo}" in lines[0], lines
     assert tree_digest(zoo) == before
+
+
+@pytest.mark.parametrize("content", [bytes(range(256)) * 4, b"a;b;c\n1;2;3\n", b"frames,sps\n512,100\n"])
+def test_report_on_a_metrics_csv_that_is_not_the_apps_table_is_one_line(finished_run, tmp_path, content):
+    run = copy_of(finished_run, tmp_path)
+    (run / "metrics.csv").write_bytes(content)
+    result = run_cli(str(run), module="ppo_torchrl.report")
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 2 and len(lines) == 1 and lines[0].startswith("error:"), result.stderr[-1500:]
+    assert not (run / "report.png").exists()
+
+
+def test_an_env_key_the_env_does_not_read_is_refused(capsys):
+    code, lines = refused(["env=Hopper-v4", "env.locomotion.gait_period=0.6"], capsys)
+    assert code == 2 and len(lines) == 1 and "env.locomotion.gait_period works on MJCF robots" in lines[0], lines
+
+
+def test_evaluate_does_not_file_another_envs_checkpoint_in_a_run(finished_run, tmp_path):
+    """zoo/Hopper-v4's folder with a checkpoint of another env: one line; with out= the result goes there."""
+    run = copy_of(finished_run, tmp_path)  # an InvertedPendulum-v4 run
+    other = rundir.ZOO / "Hopper-v4" / "checkpoints" / "best.pt"
+    before = tree_digest(tmp_path)
+    result = run_cli(f"run={run}", f"checkpoint={other}", "episodes=1", module="ppo_torchrl.evaluate")
+    assert result.returncode == 2 and "is a Hopper-v4 policy and run=" in result.stderr, result.stderr[-1500:]
+    assert tree_digest(tmp_path) == before
+    result = run_cli(f"run={run}", f"checkpoint={other}", "episodes=1", f"out={tmp_path / 'elsewhere'}",
+                     module="ppo_torchrl.evaluate")
+    assert result.returncode == 0 and (tmp_path / "elsewhere" / "eval.json").is_file(), result.stderr[-1500:]
+
+
+def test_a_trial_stopped_in_its_second_seed_can_be_resumed_or_overwritten(finished_run, tmp_path, capsys):
+    """Ctrl-C in seed 7 of trial_seeds=[6,7]: the trial's manifest lists seed 6 only; resume= of the trial names
+    the seed to resume, and overwrite=true takes the trial (seed 7's files are its own run's, by its manifest)."""
+    trial = tmp_path / "trial"
+    trial.mkdir()
+    copy_of(finished_run, trial, "seed6")
+    (trial / "trial.json").write_text(json.dumps({"seeds": [6], "objective": [1.0], "mean": 1.0}))
+    rundir.record(trial)
+    seed7 = copy_of(finished_run, trial, "seed7")
+    summary = json.loads((seed7 / "summary.json").read_text())
+    (seed7 / "summary.json").write_text(json.dumps({**summary, "status": "interrupted"}))
+    code, lines = refused([f"resume={trial}"], capsys)
+    assert code == 2 and len(lines) == 1 and f"resume={seed7} continues its stopped seed" in lines[0], lines
+    assert rundir.foreign_files(trial) == []
+    result = run_cli(*RUN, "trial_seeds=[6]", "overwrite=true", f"hydra.run.dir={trial}")
+    assert result.returncode == 0, result.stderr[-1500:]
+    aside = list(tmp_path.glob("trial.replaced-*"))
+    assert len(aside) == 1 and (aside[0] / "seed7" / "checkpoints" / "last.pt").is_file()

@@ -11,7 +11,7 @@ from ppo_torchrl import report
 from ppo_torchrl.trainer import Trainer
 from ppo_torchrl.validation import validate_config
 
-from conftest import TINY, compose_config, run_cli
+from conftest import ROOT, TINY, compose_config, run_cli
 
 PRESETS = ["arena_hopper", "practical_rl_halfcheetah", "reinforce_pendulum", "aidl_halfcheetah", "aidl_anymal",
            "aidl_anymal_step"]
@@ -235,3 +235,36 @@ def test_a_search_space_is_checked_value_by_value_and_a_grid_job_by_job(tmp_path
         cli.prepare(["-m", "hparams_search=optuna", "env=InvertedPendulum-v4", *space,
                      "loss.minibatch_size=choice(64,3000)", f"hydra.sweep.dir={tmp_path / 'sweep'}"])
     assert not (tmp_path / "sweep").exists()
+
+
+def test_ctrl_c_in_a_stored_optuna_trial_marks_it_failed(tmp_path):
+    """Issue 47: the trial a signal stops is FAIL in the stored study at once, never left RUNNING."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    import optuna
+
+    storage = f"sqlite:///{tmp_path / 'study.db'}"
+    sweep = tmp_path / "sweep"
+    args = ["-m", "hparams_search=optuna", "env=InvertedPendulum-v4", "hydra.sweeper.n_trials=2",
+            "collector.frames_per_batch=256", "collector.total_frames=1000000", "eval.every_frames=0", "logger=none",
+            "compile=false", "optim.lr=choice(1e-4,3e-4)", f"hydra.sweeper.storage={storage}",
+            f"hydra.sweep.dir={sweep}"]
+    proc = subprocess.Popen([sys.executable, "-m", "ppo_torchrl", *args], cwd=ROOT, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.time() + 240
+        while time.time() < deadline and not list(sweep.glob("*/metrics.csv")) and proc.poll() is None:
+            time.sleep(0.2)
+        assert list(sweep.glob("*/metrics.csv")), "the first trial did not start within 240 s"
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, err[-1500:]
+    (summary,) = optuna.get_all_study_summaries(storage)
+    states = [t.state for t in optuna.load_study(study_name=summary.study_name, storage=storage).trials]
+    assert states == [optuna.trial.TrialState.FAIL], states
