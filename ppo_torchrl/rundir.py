@@ -45,7 +45,9 @@ RUN_FILES = (r"config\.yaml|metrics\.csv|summary\.json|report\.png|policy\.pt|er
 OWNED = re.compile(rf"^(?:{RUN_FILES}|multirun\.yaml|optimization_results\.yaml|sweep_report\.(?:png|md|csv)|\.lock"
                    rf"|trial\.json|seed\d+/(?:{RUN_FILES}|{re.escape(MANIFEST)}))$")
 # Listed or not, these are the app's in an app's dir: a checkpoint or a temp file of a write cut short.
-UNLISTED_OK = re.compile(r"^(?:(?:seed\d+/)?checkpoints/(?:last|best|frames_\d+)\.pt|(?:.+/)?\.[^/]+\.tmp)$")
+# (Hydra's start-up files too: a run killed before it listed them; nothing is ever deleted for being here)
+UNLISTED_OK = re.compile(r"^(?:(?:seed\d+/)?checkpoints/(?:last|best|frames_\d+)\.pt|(?:.+/)?\.[^/]+\.tmp"
+                         r"|\.hydra/(?:config|hydra|overrides)\.yaml|__main__\.log)$")
 
 ZOO = Path(__file__).resolve().parent.parent / "zoo"  # the shipped policies: read-only to every command
 _BEGAN_NS = time.time_ns()  # this process's start: `record` lists only the files written since
@@ -324,8 +326,12 @@ def claim(directory: Path, *, overwrite: bool = False, resume: bool = False, wha
     lock(directory)
     if resume:
         return directory
+    manifest = not (directory / MANIFEST).exists()
+    if manifest:  # the dir is the app's from its first file: a kill during start-up leaves a run dir
+        atomic_write_json(directory / MANIFEST, {"app": "ppo_torchrl", "files": []})
     before = set() if what == "job" else set(_files(directory))
-    _pending[directory.resolve()] = {"what": what, "created": created, "aside": aside, "before": before}
+    _pending[directory.resolve()] = {"what": what, "created": created, "aside": aside, "before": before,
+                                     "manifest": manifest}
     return directory
 
 
@@ -402,6 +408,8 @@ def rollback(directory: Optional[Path] = None) -> None:
             for name in _files(key):
                 if name not in state["before"]:
                     (key / name).unlink()
+            if state["manifest"]:
+                (key / MANIFEST).unlink()
             _prune_empty(key)
             if state["aside"]:
                 key.rmdir()  # only this command's (now empty) dir: the old run goes back in one rename

@@ -215,3 +215,18 @@ def test_a_trial_stopped_in_its_second_seed_can_be_resumed_or_overwritten(finish
     assert result.returncode == 0, result.stderr[-1500:]
     aside = list(tmp_path.glob("trial.replaced-*"))
     assert len(aside) == 1 and (aside[0] / "seed7" / "checkpoints" / "last.pt").is_file()
+
+
+def test_a_run_killed_during_start_up_can_be_started_again(tmp_path, capsys):
+    """kill -9 after Hydra's first files and before the run's first listing: the dir holds the app's empty manifest
+    and .hydra/; a new run there is refused naming overwrite=true, which then takes it (nothing deleted)."""
+    run = tmp_path / "run"
+    (run / ".hydra").mkdir(parents=True)
+    (run / ".ppo_torchrl.json").write_text(json.dumps({"app": "ppo_torchrl", "files": []}))
+    for name in ("config", "hydra", "overrides"):
+        (run / ".hydra" / f"{name}.yaml").write_text("{}\n")
+    code, lines = refused([*RUN, f"hydra.run.dir={run}"], capsys)
+    assert code == 2 and len(lines) == 1 and "overwrite=true" in lines[0], lines
+    result = run_cli(*RUN, "overwrite=true", f"hydra.run.dir={run}")
+    assert result.returncode == 0, result.stderr[-1500:]
+    assert (next(tmp_path.glob("run.replaced-*")) / ".hydra" / "config.yaml").read_text() == "{}\n"
