@@ -113,3 +113,21 @@ def load_policy(run_dir: Path, which: str = "best"):
     ac.actor.load_state_dict(state["actor"])
     ac.critic.load_state_dict(state["critic"])
     return cfg, ac, state
+
+
+def check_same_env(run_dir: Path, cfg, checkpoint: str) -> None:
+    """A checkpoint of another env is not filed in this run's dir: one ConfigError line (out=<dir> writes it
+    elsewhere). The run's env is its config.yaml's; a run without a readable one is not checked."""
+    from omegaconf import OmegaConf
+
+    from ppo_torchrl.envs import env_label
+
+    try:
+        own = OmegaConf.load(Path(run_dir) / "config.yaml").env
+        own_label = env_label(own)
+    except Exception:  # noqa: BLE001 - no config.yaml, or a damaged one: nothing to compare with
+        return
+    if own_label != env_label(cfg.env):
+        raise ConfigError(f"checkpoint={checkpoint} is a {env_label(cfg.env)} policy and run={run_dir} a {own_label} "
+                          f"run: its results would be filed as this run's; evaluate it with run=<its own run dir>, "
+                          "or give out=<dir>")

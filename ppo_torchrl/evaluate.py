@@ -402,22 +402,6 @@ def apply_overrides(cfg, overrides: list[str]):
     return cfg
 
 
-def check_same_env(run_dir: Path, cfg, checkpoint: str) -> None:
-    """A checkpoint of another env is not filed in this run's dir: one ConfigError line (out=<dir> writes it
-    elsewhere). The run's env is its config.yaml's; a run without a readable one is not checked."""
-    from omegaconf import OmegaConf
-
-    try:
-        own = OmegaConf.load(Path(run_dir) / "config.yaml").env
-        own_label = env_label(own)
-    except Exception:  # noqa: BLE001 - no config.yaml, or a damaged one: nothing to compare with
-        return
-    if own_label != env_label(cfg.env):
-        raise ConfigError(f"checkpoint={checkpoint} is a {env_label(cfg.env)} policy and run={run_dir} a {own_label} "
-                          f"run: its results would be filed as this run's; evaluate it with run=<its own run dir>, "
-                          "or give out=<dir>")
-
-
 def parse_heights(text: str) -> list[tuple]:
     """heights=0,0.05,0.1 (m) or, for env=legged, in leg lengths: 0,0.2l,0.25l,0.3l. [(value, in leg lengths)]."""
     example = "e.g. 0,0.05,0.1,0.15,0.2 (m) or, for env=legged, 0,0.2l,0.25l,0.3l (leg lengths)"
@@ -519,7 +503,7 @@ def height_sweep(cfg, ac, obs_stats, heights: list[float], episodes: int, seed: 
 
 
 def main(argv: list[str]) -> dict:
-    from ppo_torchrl.checkpoint import check_spec, load_policy
+    from ppo_torchrl.checkpoint import check_same_env, check_spec, load_policy
     from ppo_torchrl.cli import parse_args, resolve_run
     from ppo_torchrl.envs import env_spec
     from ppo_torchrl.rundir import atomic_write_json, check_replaceable, is_run, output_dir_for, record, unwritable
