@@ -7,11 +7,14 @@ from __future__ import annotations
 import fcntl
 import json
 import os
+import signal
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 
-from conftest import run_cli
+from conftest import ROOT, run_cli
 from ppo_torchrl import rundir
 from test_bad_input import finished_run, refused, tree_digest  # noqa: F401  (the module's finished run)
 from test_reliability_round3 import RUN, copy_of
@@ -230,3 +233,50 @@ def test_a_run_killed_during_start_up_can_be_started_again(tmp_path, capsys):
     result = run_cli(*RUN, "overwrite=true", f"hydra.run.dir={run}")
     assert result.returncode == 0, result.stderr[-1500:]
     assert (next(tmp_path.glob("run.replaced-*")) / ".hydra" / "config.yaml").read_text() == "{}\n"
+
+
+WAIT_FOREVER = """
+import multiprocessing, os, signal, sys, threading, torch
+sys.path.insert(0, {tests!r})
+from conftest import TINY, compose_config
+from ppo_torchrl.collectors import make_collector
+from ppo_torchrl.envs import env_spec
+from ppo_torchrl.errors import EnvironmentFault
+from ppo_torchrl.models import make_actor_critic
+
+if __name__ == "__main__":
+    cfg = compose_config(["env=InvertedPendulum-v4", *TINY, "collector.workers=2", "collector.num_envs=2"])
+    collection = make_collector(cfg, make_actor_critic(cfg.policy, env_spec(cfg.env)), 3, torch.device("cpu"))
+    try:
+        collection.collect()
+        procs = collection.collector.procs
+        reader, writer = multiprocessing.Pipe(duplex=False)  # nothing is ever sent: recv() would wait for ever
+        threading.Timer(1.0, os.kill, (procs[1].pid, signal.SIGKILL)).start()
+        print("killed", procs[1].pid, flush=True)
+        reader.recv()
+    except EnvironmentFault as error:
+        print("raised", error, flush=True)
+        procs[0].join()  # ends only if something ended it
+        print("other", procs[0].exitcode, flush=True)
+    finally:
+        collection.close()
+"""
+
+
+def test_a_dead_worker_ends_any_wait_of_the_main_process(tmp_path):
+    """Issue 47, item 4: the main process blocked where no timeout would ever fire (a read of a pipe nothing
+    writes) is woken by a worker's death itself: the wait is bounded by the death, not by a clock."""
+    script = tmp_path / "wait_forever.py"
+    script.write_text(WAIT_FOREVER.format(tests=str(ROOT / "tests")))
+    process = subprocess.Popen([sys.executable, str(script)], cwd=ROOT, stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        out, err = process.communicate(timeout=600)  # a safety net for a broken build, not a timing claim
+    finally:
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.wait()
+    assert process.returncode == 0, err[-2000:]
+    pid = int(next(line for line in out.splitlines() if line.startswith("killed")).split()[1])
+    assert f"raised collector worker 1 (pid {pid}) died (killed by SIGKILL)" in out, out
+    assert "other -9" in out  # the other worker is stopped too (SIGKILL): nothing is left to wait for

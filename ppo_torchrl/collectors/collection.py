@@ -29,7 +29,7 @@ from torchrl.collectors import Collector
 from ppo_torchrl.collectors.choice import resolve_backend
 from ppo_torchrl.collectors.fast import FastCollector, open_state, packed_state
 from ppo_torchrl.collectors.multiprocess import (
-    dead_worker_error,
+    WorkerWatch,
     make_multi_collector,
     warn_if_oversubscribed,
     worker_env,
@@ -60,6 +60,7 @@ class Collection:
         transforms = list(self.env.transform)
         self.obs_norm, self.reward_norm = stats_of(transforms)
         self.gym = next(t for t in transforms if isinstance(t, GymEnvs))
+        self._watch: Optional[WorkerWatch] = None  # with worker processes: a death ends the run at once
         if not self.multi:
             self._new_collector = functools.partial(collector_class, policy=policy,
                                                     auto_register_policy_transforms=False, **common)
@@ -79,6 +80,7 @@ class Collection:
                 self.collector = make_multi_collector(c, make_env, policy, collector_class, common)
             finally:
                 signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
+            self._watch = WorkerWatch.of(self.collector)
             self.collector.set_seed(seed)
         self._keys = self._stat_keys()
         self._base: Dict[str, Optional[dict]] = {}  # the merged stats the workers started the batch from
@@ -95,8 +97,7 @@ class Collection:
             if self.multi:
                 self._merge_stats()
         except Exception:
-            if self.multi:
-                dead_worker_error(self.collector)
+            self._raise_if_a_worker_died()
             raise
         # one env: [steps]; batched envs: [num_envs, steps]; workers add a leading dim: all -> [envs, steps]
         batch = batch.reshape(-1, batch.shape[-1])
@@ -138,13 +139,17 @@ class Collection:
         return keys
 
     def _collector_state(self):
-        """The collector's `state_dict()`; with workers, a dead one is one line naming it (dead_worker_error)."""
+        """The collector's `state_dict()`; with workers, a dead one is one line naming it (WorkerWatch)."""
         try:
             return self.collector.state_dict()
         except Exception:
-            if self.multi:
-                dead_worker_error(self.collector)
+            self._raise_if_a_worker_died()
             raise
+
+    def _raise_if_a_worker_died(self) -> None:
+        error = self._watch.error() if self._watch is not None else None
+        if error is not None:
+            raise error from None
 
     def _worker_states(self) -> Tuple[object, list]:
         """The collector's state (MultiSyncCollector: {"worker0": ..., "frames": ...}; Ray: a list),
@@ -239,6 +244,8 @@ class Collection:
         self._iterator = iter(self.collector)
 
     def close(self) -> None:
+        if self._watch is not None:
+            self._watch.stop()
         self.collector.shutdown()
         if self.multi:
             from ppo_torchrl.collectors.multiprocess import shutdown_ray

@@ -49,24 +49,76 @@ def make_multi_collector(c, make_env: list, policy, collector_class: type, kwarg
     return MultiSyncCollector(make_env, policy, cat_results="stack", **kwargs)
 
 
-def dead_worker_error(collector) -> None:
-    """A worker killed (kill -9, out of memory) is one line naming it and what is on disk, not TorchRL's error."""
-    from ppo_torchrl.signals import ON_DISK
+class WorkerWatch:
+    """A worker that dies while the run uses it (kill -9, out of memory) ends the run at once, whatever the
+    load, with one line naming it. A thread waits on the workers' process sentinels, which the kernel wakes
+    the instant a process ends (no polling, no timeout to tune). It then SIGKILLs the other workers (their
+    batch cannot be used: nothing of theirs is saved; they ignore SIGTERM, see worker_env) and sends SIGUSR1
+    to the main thread, whose handler raises the error: a signal ends any blocking call the main thread is
+    in (a pipe, a queue, a lock), so no wait on a dead worker outlives it. TorchRL's own checks may see
+    the death first; `error()` is the same line either way, raised once. `stop()` before a shutdown."""
 
-    import time
+    def __init__(self, procs: list):
+        self.procs = list(procs)
+        self.dead: Optional[tuple] = None  # (index, process) of the first worker that ended
+        self._raised = False
+        self._stop_r, self._stop_w = os.pipe()
+        self._previous = signal.signal(signal.SIGUSR1, self._interrupt)
+        self._thread = threading.Thread(target=self._watch, name="ppo_torchrl-worker-watch", daemon=True)
+        self._thread.start()
 
-    procs = getattr(collector, "procs", []) or []
-    deadline = time.monotonic() + 2.0  # a pipe can report the end a moment before the process is reaped
-    dead = []
-    while procs and not dead and time.monotonic() < deadline:
-        dead = [(i, p) for i, p in enumerate(procs) if not p.is_alive()]
-        if not dead:
-            time.sleep(0.05)
-    if dead:  # the one a signal killed first (the others may have been shut down after it)
-        i, proc = min(dead, key=lambda d: (d[1].exitcode or 0) >= 0)
-        code = proc.exitcode or 0
-        how = f"killed by {signal.Signals(-code).name}" if code < 0 else f"exit code {code}"
-        raise EnvironmentFault(f"collector worker {i} (pid {proc.pid}) died ({how}); {ON_DISK.describe()}") from None
+    @classmethod
+    def of(cls, collector) -> Optional["WorkerWatch"]:
+        """A watch over a multi-process collector's workers (None for Ray, or off the main thread)."""
+        procs = getattr(collector, "procs", None)
+        if not procs or threading.current_thread() is not threading.main_thread():
+            return None
+        return cls(procs)
+
+    def _watch(self) -> None:
+        from multiprocessing.connection import wait
+
+        sentinels = {p.sentinel: i for i, p in enumerate(self.procs)}
+        ready = wait([*sentinels, self._stop_r])
+        if self._stop_r in ready:
+            return
+        i = min(sentinels[s] for s in ready if s in sentinels)
+        self.dead = (i, self.procs[i])
+        for j, proc in enumerate(self.procs):
+            if j != i:
+                try:
+                    os.kill(proc.pid, signal.SIGKILL)
+                except OSError:
+                    pass  # already gone
+        signal.pthread_kill(threading.main_thread().ident, signal.SIGUSR1)
+
+    def _interrupt(self, signum, frame) -> None:
+        if self.dead is not None and not self._raised:
+            raise self.error()
+
+    def error(self, timeout_s: float = 2.0) -> Exception:
+        """The one line for a dead worker (an EnvironmentFault), once; None if no worker has died."""
+        if self.dead is None:  # TorchRL saw it first: the sentinel wakes the thread at the same instant
+            self._thread.join(timeout_s)
+        if self.dead is None or self._raised:
+            return None
+        from ppo_torchrl.signals import ON_DISK
+
+        self._raised = True
+        i, proc = self.dead
+        proc.join(timeout_s)  # reaped, for its exit code
+        code = proc.exitcode
+        how = "exit code unknown" if code is None else \
+            f"killed by {signal.Signals(-code).name}" if code < 0 else f"exit code {code}"
+        return EnvironmentFault(f"collector worker {i} (pid {proc.pid}) died ({how}); {ON_DISK.describe()}")
+
+    def stop(self) -> None:
+        """Before the workers are shut down on purpose: their ends are not deaths."""
+        os.write(self._stop_w, b"x")
+        self._thread.join()
+        signal.signal(signal.SIGUSR1, self._previous)
+        for fd in (self._stop_r, self._stop_w):
+            os.close(fd)
 
 
 def shutdown_ray(collector) -> None:
