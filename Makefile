@@ -16,8 +16,12 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install --quiet -e ".[test,loggers,sweeps]"
 	touch $(STAMP)
 
+# make exits 2 whenever a recipe fails; a run stopped by a signal (exit 128 + n: Ctrl-C 130) stops make by
+# the same signal, so `make train` ends with the code the app gave (README: exit codes).
 train: $(STAMP)
-	MUJOCO_GL=egl $(PY) -m ppo_torchrl env=Hopper-v4 $(ARGS)
+	@echo MUJOCO_GL=egl $(PY) -m ppo_torchrl env=Hopper-v4 $(ARGS)
+	@MUJOCO_GL=egl $(PY) -m ppo_torchrl env=Hopper-v4 $(ARGS); rc=$$?; \
+		if [ $$rc -gt 128 ]; then kill -$$((rc - 128)) $$PPID; fi; exit $$rc
 
 # pytest exits 5 when it collects nothing; that is a failure here, never a silent pass.
 # -n 2: two test processes (pytest-xdist), one per core of the 2-core CI machine.

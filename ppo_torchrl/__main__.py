@@ -19,17 +19,12 @@ from pathlib import Path
 
 from ppo_torchrl import signals
 from ppo_torchrl.errors import ConfigError, Interrupted, guarded
+from ppo_torchrl.overrides import HELP_FLAGS, INFO_FLAGS, check_env_override, key_hint, split_args, whole_counts
 
 if __name__ == "__main__":
     signals.install()  # from here on a Ctrl-C or SIGTERM is one line and exit 130 / 143, imports included
 
 CONF_DIR = str(Path(__file__).resolve().parent.parent / "conf")
-# Hydra flags that print or inspect instead of running a job; those marked take a value.
-HELP_FLAGS = ("--help", "-h", "--hydra-help", "--version", "--shell-completion", "-sc")
-INFO_FLAGS = ("--cfg", "-c", "--info", "-i", "--resolve")
-VALUE_FLAGS = ("--cfg", "-c", "--package", "-p", "--config-path", "-cp", "--config-name", "-cn",
-               "--config-dir", "-cd", "--experimental-rerun")
-INFO_VALUES = ("all", "config", "defaults", "defaults-tree", "plugins", "searchpath")
 # Keys whose value is a path: passed to Hydra through an environment variable, so any character a path
 # may hold (a quote, a space, non-ASCII) reaches the app as typed, run after run and on resume.
 PATH_KEYS = ("resume", "init_from", "hydra.run.dir", "hydra.sweep.dir")
@@ -132,36 +127,6 @@ def _run_seeds(cfg, run_dir: Path) -> float:
     return mean
 
 
-def split_args(argv: list[str]) -> tuple[list[str], list[str]]:
-    """(Hydra flags with their values, key=value overrides)."""
-    flags, overrides, i = [], [], 0
-    while i < len(argv):
-        arg, following = argv[i], argv[i + 1] if i + 1 < len(argv) else None
-        takes_value = arg in VALUE_FLAGS or (arg in ("--info", "-i") and following in INFO_VALUES)
-        if arg.startswith("-"):
-            flags += [arg, following] if takes_value else [arg]
-        else:
-            overrides.append(arg)
-        i += 2 if arg.startswith("-") and takes_value else 1
-    return flags, overrides
-
-
-def check_env_override(overrides: list[str]) -> None:
-    """`env=<name>` must name a file in conf/env; say which exist and how to use any other id."""
-    from ppo_torchrl.envs import env_files
-
-    for arg in overrides:
-        if arg.startswith("env="):
-            available = env_files()
-            for name in arg.split("=", 1)[1].split(","):
-                if name not in available:
-                    shown = ", ".join(n for n in available if n != "gym")
-                    raise ConfigError(
-                        f"env={name} has no config file. Available: {shown}. "
-                        f"For any other registered Gymnasium id use: env=gym env.id={name}"
-                    )
-
-
 def _read(path: Path) -> str:
     try:
         return path.read_text()
@@ -247,7 +212,23 @@ def compose(overrides: list[str], with_hydra: bool = False):
         with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
             return hydra_compose(config_name="config", overrides=overrides, return_hydra_config=with_hydra)
     except (HydraException, OmegaConfBaseException) as exc:
-        raise ConfigError(one_line(exc)) from exc
+        raise ConfigError(one_line(exc) + unknown_key_hint(exc, overrides)) from exc
+
+
+def unknown_key_hint(exc: BaseException, overrides: list[str]) -> str:
+    """`; did you mean collector.total_frames?` for a key the config does not have."""
+    import re
+
+    found = re.search(r"override '([^']+)'", str(exc)) or re.search(r"Key '([^']+)' (?:is )?not in", str(exc))
+    if not found:
+        return ""
+    groups = [o for o in overrides if "=" in o and "." not in o.partition("=")[0] and "/" not in o]
+    if groups == overrides:  # the groups alone failed: nothing to compare the key with
+        return ""
+    try:
+        return key_hint(found.group(1), compose(groups))
+    except ConfigError:
+        return ""
 
 
 def hydra_value(cfg, key: str):
@@ -440,6 +421,7 @@ def prepare(argv: list[str]) -> list[str]:
     resume = next((unquote(o.split("=", 1)[1]) for o in overrides if o.startswith("resume=")), None)
     argv, overrides = route_paths(argv), route_paths(overrides)
     check_env_override(overrides)
+    argv, overrides = whole_counts(argv, overrides, compose)  # collector.total_frames=1e6: the int it is
     multirun = "-m" in flags or "--multirun" in flags
     jobs = sweep_jobs(overrides) if multirun else [overrides]
     hydra_cfg = compose(jobs[0] + hydra_overrides(overrides), with_hydra=True) if multirun else None

@@ -9,6 +9,7 @@ leaves the previous checkpoint intact.
 from __future__ import annotations
 
 import io
+import sys
 from pathlib import Path
 from typing import Optional
 
@@ -85,17 +86,35 @@ def check_spec(state: dict, spec, env_id: str) -> None:
 
 
 def resolve_checkpoint(run_dir: Path, which: str) -> Path:
-    """`best`, `last` or a file path (absolute, or relative to the run's checkpoints dir)."""
+    """`best`, `last` or a file path (absolute, or relative to the run's checkpoints dir). `best` of a run
+    without one (no eval saved it: zoo/quadruped_climb ships last.pt alone) is `last`, said on stderr;
+    a checkpoint that is not there is one line naming the ones that are."""
     run_dir = Path(run_dir)
-    if not (run_dir / "checkpoints").is_dir():
+    if not run_dir.exists():
+        raise ConfigError(f"run={run_dir}: no such dir")
+    found = run_dir / "checkpoints"
+    if not found.is_dir():
         raise ConfigError(f"run={run_dir} is not a ppo_torchrl run dir (no checkpoints/)")
     if which in ("best", "last"):
-        path = run_dir / "checkpoints" / f"{which}.pt"
-        if which == "best" and not path.exists():
-            path = run_dir / "checkpoints" / LAST  # no eval ran yet: the last is the best we have
-        return path
-    path = Path(which)
-    return path if path.is_absolute() or path.exists() else run_dir / "checkpoints" / which
+        path = found / f"{which}.pt"
+        if which == "best" and not path.exists() and (found / LAST).is_file():
+            print(f"note: {run_dir} has no best.pt (no eval saved one): using last.pt", file=sys.stderr, flush=True)
+            path = found / LAST
+    else:
+        path = Path(which)
+        path = path if path.is_absolute() or path.exists() else found / which
+    if not path.is_file():
+        have = sorted(f.name for f in found.glob("*.pt"))
+        named = {BEST: "checkpoint=best", LAST: "checkpoint=last"}
+        raise ConfigError(f"checkpoint={which}: {path} does not exist; {found} holds "
+                          + (", ".join(f"{n} ({named.get(n, f'checkpoint={n}')})" for n in have) if have else
+                             "no checkpoint"))
+    return path
+
+
+def label(path: Path) -> str:
+    """What a resolved checkpoint is called in results and file names: best, last, or its file's stem."""
+    return {BEST: "best", LAST: "last"}.get(Path(path).name, Path(path).stem)
 
 
 def load_policy(run_dir: Path, which: str = "best"):

@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any, Dict, Optional, Tuple
 
 from ppo_torchrl.errors import ConfigError
+from ppo_torchrl.overrides import SCIENTIFIC, closest
 
 TRUE, FALSE = {"true", "1", "yes"}, {"false", "0", "no"}
 LATEST = "latest"  # run=latest: the newest run dir under OUTPUTS; run=latest/<env>: the newest of that env
@@ -30,7 +31,9 @@ def parse_args(argv: list[str], spec: Dict[str, Any], usage: str, help: Optional
     for arg in argv:
         key, sep, raw = arg.partition("=")
         if not sep or key not in spec:
-            raise ConfigError(f"unexpected argument '{arg}'; usage: {usage}")
+            near = closest(key.lstrip("-"), spec) if key else None
+            hint = f"; did you mean {near}={raw or '<value>'}?" if near else ""
+            raise ConfigError(f"unexpected argument '{arg}'{hint}; usage: {usage}")
         default = spec[key]
         try:
             if isinstance(default, bool):
@@ -38,7 +41,8 @@ def parse_args(argv: list[str], spec: Dict[str, Any], usage: str, help: Optional
                     raise ValueError
                 values[key] = raw.lower() in TRUE
             elif isinstance(default, int):
-                values[key] = int(raw)
+                values[key] = int(raw) if not SCIENTIFIC.fullmatch(raw) or not float(raw).is_integer() \
+                    else int(float(raw))  # episodes=1e2
             else:
                 values[key] = raw
         except ValueError:

@@ -19,6 +19,7 @@ height_sweep.csv, the success-rate curve height_sweep.png, height_sweep_episodes
 from __future__ import annotations
 
 import copy
+import functools
 import itertools
 import math
 import sys
@@ -37,10 +38,10 @@ from ppo_torchrl.robots.env import LocomotionEnv
 from ppo_torchrl.robots.gait import FOOT_PAIRS
 from ppo_torchrl.models import ActorCritic, deterministic_policy
 
-# Videos play in real time: one frame per control step when the control rate is at most VIDEO_MAX_FPS,
-# else every k-th step, k = round(rate / VIDEO_FPS), written at rate / k fps.
-VIDEO_FPS = 30
-VIDEO_MAX_FPS = 60
+# Videos play in real time at VIDEO_MAX_FPS or less: a frame every k-th control step, k the smallest that
+# keeps rate / k <= VIDEO_MAX_FPS (50 Hz control: every 2nd step, 25 fps), written at rate / k fps. Only
+# those frames are rendered (~0.1 s each on an idle CPU), so the frame rate is the filming cost.
+VIDEO_MAX_FPS = 30
 VIDEO_SIZE = (480, 360)
 QUIET_S = 5.0  # progress=None (training's evals): no line unless the eval is still running after this
 EVERY_S = 10.0  # off a terminal, a plain progress line at most this often
@@ -67,8 +68,24 @@ class EpisodeProgress:
         if elapsed < self.quiet_s or (not self.tty and now - self.last < EVERY_S):
             return
         eta = max(elapsed - film_s, 0.0) / done * (self.total - done) + film_left_s
-        line = f"eval: {done}/{self.total} episodes, {elapsed:.0f} s elapsed, ETA {eta:.0f} s"
-        print("\r" + line if self.tty else line, end="" if self.tty else "\n", file=sys.stderr, flush=True)
+        self._show(now, f"eval: {done}/{self.total} episodes, {elapsed:.0f} s elapsed, ETA {eta:.0f} s")
+
+    def filming(self, done: int, film: "Filming", lengths: Sequence[int]) -> None:
+        """After each filmed frame: `eval: 0/10 episodes, filming episode 0: 120 frames (4.8 s of video),
+        31 s elapsed, filming left ~90 s`, at most every second on a terminal, else every EVERY_S seconds
+        (rendering is the slow part of an eval: the terminal is never silent for long while it runs)."""
+        now = time.perf_counter()
+        elapsed = now - self.start
+        quiet = now - (self.last if self.shown else self.start)
+        if elapsed < min(self.quiet_s, EVERY_S) or quiet < (1.0 if self.tty else EVERY_S):
+            return
+        left = film.left_s(done, lengths)
+        self._show(now, f"eval: {done}/{self.total} episodes, filming episode {film.filmed[-1]}: {film.frames} "
+                        f"frames ({film.frames / film.fps:.1f} s of video), {elapsed:.0f} s elapsed"
+                        + (f", filming left ~{left:.0f} s" if left else ""))
+
+    def _show(self, now: float, line: str) -> None:
+        print("\r\x1b[K" + line if self.tty else line, end="" if self.tty else "\n", file=sys.stderr, flush=True)
         self.last, self.shown = now, True
 
 
@@ -81,13 +98,16 @@ class Filming:
 
     def __init__(self, path: Path, env, which: Sequence[int], length_s: Optional[float] = None):
         unwrapped = env.unwrapped
-        dt = getattr(unwrapped, "dt", None) or 1.0 / unwrapped.metadata.get("render_fps", VIDEO_FPS)
+        dt = getattr(unwrapped, "dt", None) or 1.0 / unwrapped.metadata.get("render_fps", VIDEO_MAX_FPS)
         rate = 1.0 / dt  # control steps per simulated second
-        self.every = 1 if rate <= VIDEO_MAX_FPS else max(1, round(rate / VIDEO_FPS))
+        self.every = max(1, math.ceil(rate / VIDEO_MAX_FPS - 1e-9))
         self.fps = rate / self.every
         self.path, self.env, self.which = path, env, sorted(set(which))
         self.max_frames = math.inf if length_s is None else max(1, round(length_s * self.fps))
         self.frames, self.spent_s, self.filmed, self._writer = 0, 0.0, [], None
+        self._frames_before, self._first_s = 0, 0.0
+        self.limit = getattr(env.spec, "max_episode_steps", None)  # an episode's steps at most (None: unknown)
+        self.on_frame = None  # called after each frame (EpisodeProgress.filming: the terminal is never silent)
 
     def start(self, episode: int):
         """Right after episode `episode`'s reset: the rollout callback that films it (torchrl calls it after
@@ -95,6 +115,7 @@ class Filming:
         if episode not in self.which or self.frames >= self.max_frames:
             return None
         self.filmed.append(episode)
+        self._frames_before = self.frames
         steps = itertools.count(0)
 
         def callback(*_):
@@ -120,14 +141,22 @@ class Filming:
         self._writer.append_data(frame)
         self.frames += 1
         self.spent_s += time.perf_counter() - start
+        if self.frames == 1:  # the renderer's start-up: not the cost of the frames to come
+            self._first_s = self.spent_s
+        if self.on_frame is not None:
+            self.on_frame()
 
     def left_s(self, done: int, lengths: Sequence[int]) -> float:
         """The filming still to come after `done` episodes: at this video's cost per frame so far, the
         episodes left to film, each as long as the mean episode so far (within the length cap)."""
-        if not self.frames or not lengths:
+        typical = np.mean(lengths) if lengths else self.limit  # no episode ended yet: as long as allowed
+        if not self.frames or not typical:
             return 0.0
-        left = sum(e >= done for e in self.which) * math.ceil(np.mean(lengths) / self.every)
-        return self.spent_s / self.frames * min(left, self.max_frames - self.frames)
+        left = sum(e >= done for e in self.which) * math.ceil(typical / self.every)
+        if self.filmed and self.filmed[-1] == done:  # the episode being filmed: what it has not filmed yet
+            left -= min(self.frames - self._frames_before, math.ceil(typical / self.every))
+        per_frame = (self.spent_s - self._first_s) / (self.frames - 1) if self.frames > 1 else self.spent_s
+        return per_frame * max(min(left, self.max_frames - self.frames), 0)
 
     def close(self) -> Optional[dict]:
         """Finish the mp4; what it holds (None when no frame was taken)."""
@@ -207,6 +236,8 @@ def run_episodes(cfg, ac: ActorCritic, obs_stats: Optional[dict], seeds: Sequenc
                 start = env.reset()
                 xy_start = sim.qpos[:2].copy() if sim is not None else None
                 callback = film.start(i) if film is not None else None
+                if callback is not None:
+                    film.on_frame = functools.partial(shown.filming, i, film, lengths)
                 rollout = env.rollout(max_steps=1_000_000, policy=actor, break_when_any_done=True,
                                       auto_reset=False, tensordict=start, callback=callback)
                 returns.append(float(rollout.get(("next", "reward")).sum()))
@@ -503,7 +534,8 @@ def height_sweep(cfg, ac, obs_stats, heights: list[float], episodes: int, seed: 
 
 
 def main(argv: list[str]) -> dict:
-    from ppo_torchrl.checkpoint import check_same_env, check_spec, load_policy
+    from ppo_torchrl.checkpoint import check_same_env, check_spec, load_policy, resolve_checkpoint
+    from ppo_torchrl.checkpoint import label as checkpoint_label
     from ppo_torchrl.cli import parse_args, resolve_run
     from ppo_torchrl.envs import env_spec
     from ppo_torchrl.rundir import atomic_write_json, check_replaceable, is_run, output_dir_for, record, unwritable
@@ -546,21 +578,23 @@ def main(argv: list[str]) -> dict:
     if heights and args["video"]:
         raise ConfigError("video=true films one evaluation; leave it out of a heights= sweep")
     run_dir = resolve_run(args["run"])  # run=latest[/<env>]: the newest run dir under outputs/
+    checkpoint = resolve_checkpoint(run_dir, args["checkpoint"])  # best without a best.pt: last.pt, said so
+    which = checkpoint_label(checkpoint)
     out_dir = Path(args["out"]) if args["out"] else output_dir_for(run_dir, run_dir / "eval")  # zoo: outputs/zoo/<name>
     why = unwritable(out_dir)  # before any episode runs
     if why:
         raise ConfigError(f"cannot write the eval's files in {out_dir}: {why}; give a writable dir with out=<dir>")
-    video = out_dir / f"{args['checkpoint'] if args['checkpoint'] in ('best', 'last') else 'checkpoint'}.mp4"
+    video = out_dir / f"{which}.mp4"
     writes = [out_dir / name for name in SWEEP_FILES] if heights else [out_dir / "eval.json"] + [video] * args["video"]
     check_replaceable(run_dir, writes)  # a file there that the app did not write is left alone: one line
-    cfg, ac, state = load_policy(run_dir, args["checkpoint"])
+    cfg, ac, state = load_policy(run_dir, str(checkpoint))
     if not args["out"]:
         check_same_env(run_dir, cfg, args["checkpoint"])
     if overrides:
         cfg = apply_overrides(cfg, overrides)
         check_spec(state, env_spec(cfg.env), cfg.env.id)
     obs_stats = state["normalization"]["obs"]
-    label = f"{env_label(cfg.env)} @ {state['frames']} frames ({args['checkpoint']})"
+    label = f"{env_label(cfg.env)} @ {state['frames']} frames ({which})"
     if heights:
         heights = heights_in_metres(heights, cfg.env)
         rows = height_sweep(cfg, ac, obs_stats, heights, args["episodes"], args["seed"], out_dir,
@@ -573,7 +607,7 @@ def main(argv: list[str]) -> dict:
     result = evaluate_policy(cfg, ac, obs_stats, args["episodes"], seed=args["seed"],
                              video_path=video if args["video"] else None, progress=True,
                              video_episodes=video_episodes, video_length=video_length)
-    result.update(env=env_label(cfg.env), checkpoint=args["checkpoint"], checkpoint_frames=state["frames"],
+    result.update(env=env_label(cfg.env), checkpoint=which, checkpoint_frames=state["frames"],
                   episodes=args["episodes"], video=result.get("video"), overrides=overrides)
     atomic_write_json(out_dir / "eval.json", result)
     if is_run(run_dir):

@@ -61,7 +61,7 @@ def export_policy(cfg, ac: ActorCritic, obs_stats: Optional[dict], path: Path) -
 
 
 def main(argv: list[str]) -> Path:
-    from ppo_torchrl.checkpoint import load_policy
+    from ppo_torchrl.checkpoint import label, load_policy, resolve_checkpoint
     from ppo_torchrl.cli import parse_args, resolve_run
     from ppo_torchrl.rundir import check_replaceable, is_run, output_dir_for, record, unwritable
 
@@ -73,16 +73,17 @@ def main(argv: list[str]) -> Path:
              "out, normalization baked in; it runs with torch alone: torch.jit.load('policy.pt')(obs).")
     args = parse_args(argv, {"run": None, "checkpoint": "best"}, usage, help, about)
     run_dir = resolve_run(args["run"])  # run=latest[/<env>]: the newest run dir under outputs/
+    checkpoint = resolve_checkpoint(run_dir, args["checkpoint"])  # best without a best.pt: last.pt, said so
     target = output_dir_for(run_dir, run_dir) / "policy.pt"  # a shipped zoo folder: outputs/zoo/<name>/policy.pt
     check_replaceable(run_dir, [target])  # a policy.pt the app did not write is left alone
-    cfg, ac, state = load_policy(run_dir, args["checkpoint"])
+    cfg, ac, state = load_policy(run_dir, str(checkpoint))
     why = unwritable(target.parent)
     if why:
         raise ConfigError(f"cannot write {target}: {why}; copy the run dir somewhere writable")
     path = export_policy(cfg, ac, state["normalization"]["obs"], target)
     if is_run(run_dir):
         record(run_dir, [path])
-    print(f"exported {cfg.env.id} policy ({args['checkpoint']}, {state['frames']} frames) to {path}")
+    print(f"exported {cfg.env.id} policy ({label(checkpoint)}, {state['frames']} frames) to {path}")
     return path
 
 

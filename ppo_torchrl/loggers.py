@@ -10,6 +10,7 @@ import csv
 import math
 import sys
 import time
+from collections import deque
 from pathlib import Path
 from typing import Dict, List, Optional
 
@@ -157,6 +158,7 @@ class Progress:
         self.tty = sys.stdout.isatty() if tty is None else tty
         self.tag = job_tag()  # a sweep job's lines start with its number
         self._last = -math.inf  # the first update always prints
+        self._seen: deque = deque(maxlen=20)  # (time, frames) of the recent updates: the ETA's rate
         self.bar = None
         if self.tty:
             from tqdm import tqdm
@@ -178,16 +180,25 @@ class Progress:
                                f"{row['eval/return_std']:.1f}")
             return
         now = time.perf_counter()
+        self._seen.append((now, row["frames"]))
         if force or "eval" in stats or now - self._last >= self.every_s:
             self._last = now
-            eta = (self.total - row["frames"]) / max(row["sps"], 1e-9)
             parts = [f"frames {row['frames']:>9d}/{self.total}", f"sps {row['sps']:6.0f}"]
             if "return" in stats:
                 parts.append(f"return(last100) {row['train/return_last100']:8.1f}")
             if "eval" in stats:
                 parts.append(f"eval {row['eval/return_mean']:8.1f} +- {row['eval/return_std']:.1f}")
-            parts.append(f"eta {eta / 60:5.1f} min")
+            eta = self.eta_s()
+            parts.append(f"eta {eta / 60:5.1f} min" if eta is not None else "eta after warm-up")
             print(self.tag + " | ".join(parts), flush=True)
+
+    def eta_s(self) -> Optional[float]:
+        """Seconds left at the rate of the recent updates (the first one, which holds the compile warm-up
+        and the envs' start, is never in it); None before there are two."""
+        if len(self._seen) < 2:
+            return None
+        (t0, f0), (t1, f1) = self._seen[0], self._seen[-1]
+        return (self.total - f1) * (t1 - t0) / max(f1 - f0, 1)
 
     def close(self) -> None:
         if self.bar is not None:

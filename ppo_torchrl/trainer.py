@@ -55,6 +55,22 @@ def use_compile(cfg) -> bool:
                                 and cfg.loss.name not in NOT_COMPILABLE)
 
 
+def continued_schedule(state: dict, cfg, num_iterations: int) -> tuple:
+    """The lr schedule's anchor after a resume. The same budget: the checkpoint's. A budget extended
+    (resume= with more collector.total_frames): from the lr of the last update the run made, down to 0 at
+    the new end, with no jump (a restart at optim.lr would undo the annealing). A new optim.lr scales it."""
+    saved = state.get("config") or {}
+    old_lr = (saved.get("optim") or {}).get("lr", cfg.optim.lr)
+    a, lr_a = state.get("lr_schedule") or (0, old_lr)  # checkpoints before the anchor: the schedule from 0
+    collector = saved.get("collector") or {}
+    old_n = math.ceil(collector.get("total_frames", cfg.collector.total_frames)
+                      / collector.get("frames_per_batch", cfg.collector.frames_per_batch))
+    i = state["iteration"]
+    if old_n != num_iterations and cfg.optim.anneal_lr and 0 < i <= old_n and i - 1 >= a:
+        a, lr_a = i - 1, lr_a * (1.0 - (i - 1 - a) / (old_n - a))  # the lr the last update used
+    return a, lr_a * cfg.optim.lr / old_lr if old_lr else lr_a
+
+
 class Trainer:
     def __init__(self, cfg, run_dir: Path, resume: Optional[dict] = None):
         self.spec = validate_config(cfg)
@@ -89,6 +105,7 @@ class Trainer:
 
         self.frames = 0
         self.iteration = 0
+        self.lr_anchor = (0, cfg.optim.lr)  # the lr schedule runs linearly from here to 0 (_set_lr)
         # At least total_frames, as SB3's learn(): 1M frames at 2048 per batch is 489 batches.
         self.num_iterations = math.ceil(cfg.collector.total_frames / cfg.collector.frames_per_batch)
         self.recent_returns: deque = deque(maxlen=100)
@@ -111,6 +128,7 @@ class Trainer:
         self.optimizer.load_state_dict(state["optimizer"])
         self.collector.load_state_dict(state["normalization"])
         self.frames, self.iteration = state["frames"], state["iteration"]
+        self.lr_anchor = continued_schedule(state, self.cfg, self.num_iterations)
         ON_DISK.checkpoint, ON_DISK.checkpoint_frames = self.ckpt.dir / checkpoint.LAST, self.frames
         ON_DISK.frames = self.frames
         self.recent_returns.extend(state.get("recent_returns", []))
@@ -237,9 +255,12 @@ class Trainer:
             self.write_summary(status="finished" if last else "running")
 
     def _set_lr(self) -> float:
+        """optim.anneal_lr: linear from the anchor (iteration a, lr_a; at first 0, optim.lr) to 0 at the
+        last iteration."""
         cfg = self.cfg.optim
-        frac = 1.0 - self.iteration / self.num_iterations if cfg.anneal_lr else 1.0
-        lr = cfg.lr * frac
+        a, lr_a = self.lr_anchor
+        frac = 1.0 - (self.iteration - a) / (self.num_iterations - a) if cfg.anneal_lr else 1.0
+        lr = lr_a * frac if cfg.anneal_lr else cfg.lr
         for group in self.optimizer.param_groups:
             group["lr"] = lr
         return lr
@@ -377,6 +398,7 @@ class Trainer:
             "normalization": self.collector.state_dict(),
             "frames": self.frames,
             "iteration": self.iteration,
+            "lr_schedule": list(self.lr_anchor),
             "spec": {"obs_dim": self.spec.obs_dim, "action_dim": self.spec.action_dim},
             "rng": {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "python": random.getstate()},
             "config": OmegaConf.to_container(self.cfg, resolve=True),

@@ -29,7 +29,7 @@ MOTOR_WITHOUT_CTRLRANGE = """<mujoco><worldbody><body name="base" pos="0 0 0.5">
 BAD_INPUT = [
     (["eval.video_episodes=[5]"], 2, "eval.video_episodes=[5] must name episodes in 0..4"),
     (["eval.video_length=-1"], 2, "eval.video_length=-1.0 must be > 0 seconds"),
-    (["env=Hoper-v4"], 2, "env=gym env.id=Hoper-v4"),
+    (["env=Hoper-v4"], 2, "did you mean env=Hopper-v4?"),
     (["env=gym", "env.id=NoSuchEnv-v0"], 2, "NoSuchEnv-v0"),
     (["env=gym"], 2, "env.id must be given"),
     (["loss=trpo"], 2, "Available options in 'loss': a2c, clip_ppo"),

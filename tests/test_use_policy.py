@@ -18,7 +18,7 @@ from ppo_torchrl.evaluate import EpisodeProgress, evaluate_policy
 from ppo_torchrl.loggers import Progress
 from ppo_torchrl.trainer import Trainer
 
-from conftest import run_cli
+from conftest import ROOT, run_cli
 
 
 @pytest.fixture(scope="module")
@@ -89,7 +89,7 @@ def test_evaluate_films_the_episodes_asked_up_to_the_length_asked(trained_run, t
 
 def test_video_follows_the_robot_at_real_time(tmp_path):
     """Gymnasium's Hopper, moved 10 m along x while filmed: it stays in frame (its `track` camera), and a
-    97-step episode at 125 Hz (a frame per 4 steps, 31.25 fps) lasts its 0.776 s of simulated time."""
+    97-step episode at 125 Hz (a frame per 5 steps, 25 fps: 30 at most) lasts its 0.776 s of simulated time."""
     from conftest import compose_config
 
     from ppo_torchrl.envs import gym_make_kwargs, make_gym_env
@@ -107,10 +107,10 @@ def test_video_follows_the_robot_at_real_time(tmp_path):
         callback()
     video = film.close()
     env.close()
-    assert (video["every"], video["fps"], video["frames"]) == (4, 31.25, 24)
+    assert (video["every"], video["fps"], video["frames"]) == (5, 25, 19)
     assert abs(video["seconds"] / (97 * env.unwrapped.dt) - 1) < 0.05
     frames = [frame for frame in imageio.get_reader(tmp_path / "hopper.mp4")]  # (list() asks its len: inf)
-    assert len(frames) == 24
+    assert len(frames) == 19
     rgb = frames[-1].astype(int)  # the hopper's orange body, 9.6 m from where it started
     orange = (rgb[..., 0] > 90) & (rgb[..., 0] - rgb[..., 1] > 35) & (rgb[..., 1] - rgb[..., 2] > 15)
     assert orange.sum() > 20  # 74 here; 0 from the free camera Gymnasium renders from unless told
@@ -135,11 +135,40 @@ def test_eval_progress_only_when_asked_or_slow(trained_run, capsys):
     terminal = EpisodeProgress(2, progress=True, tty=True)
     terminal.update(1)
     terminal.update(2)  # one updating line, erased when the eval ends
-    assert capsys.readouterr().err == "\reval: 1/2 episodes, 0 s elapsed, ETA 0 s\r\x1b[K"
+    assert capsys.readouterr().err == "\r\x1b[Keval: 1/2 episodes, 0 s elapsed, ETA 0 s\r\x1b[K"
+
+
+def test_filming_talks_while_it_renders(tmp_path, capsys):
+    """Issue 49: a filmed episode says how far it is while its frames render (off a terminal at most every
+    10 s, the first after 10 s), with the filming left: the terminal is never silent for a whole episode."""
+    from conftest import compose_config
+
+    from ppo_torchrl.envs import make_gym_env
+    from ppo_torchrl.evaluate import Filming
+
+    env = make_gym_env(compose_config(["env=InvertedPendulum-v4"]).env, "rgb_array", width=64, height=48)
+    film = Filming(tmp_path / "p.mp4", env, which=[0])
+    shown = EpisodeProgress(3, progress=None, tty=False)
+    film.on_frame = lambda: shown.filming(0, film, [])
+    env.reset(seed=0)
+    callback = film.start(0)
+    for _ in range(4):
+        callback()
+    assert capsys.readouterr().err == ""  # quiet for the first seconds
+    shown.start -= 12  # filming for 12 s now
+    callback()
+    line = capsys.readouterr().err
+    assert re.fullmatch(r"eval: 0/3 episodes, filming episode 0: 6 frames \(0\.2 s of video\), 12 s elapsed, "
+                        r"filming left ~\d+ s\n", line), line  # 1000 steps allowed: ~994 frames left to film
+    callback()
+    assert capsys.readouterr().err == ""  # the next after another 10 s
+    film.close()
+    env.close()
 
 
 def test_evaluate_bad_input_is_one_line(trained_run):
-    for args, expected in [(["run=/nonexistent"], "not a ppo_torchrl run dir"),
+    for args, expected in [(["run=/nonexistent"], "run=/nonexistent: no such dir"),
+                           ([f"run={ROOT / 'conf'}"], "not a ppo_torchrl run dir (no checkpoints/)"),
                            ([f"run={trained_run}", "episodes=many"], "expected a int"),
                            ([f"run={trained_run}", "checkpoint=nope.pt"], "does not exist")]:
         result = run_cli(*args, module="ppo_torchrl.evaluate")
@@ -243,3 +272,25 @@ def test_report_marks_each_eval_and_says_what_each_train_curve_averages(tmp_path
     plt.close(fig)
     assert report.plot_run(tmp_path).read_bytes()[:4] == b"\x89PNG"
 
+
+
+def test_checkpoint_fallbacks_say_what_was_loaded(trained_run, tmp_path):
+    """Issue 49: best without a best.pt is last.pt, labelled (last) in the line, eval.json and the video's
+    name; a checkpoint that is not there names those that are."""
+    import shutil
+
+    run = tmp_path / "run"
+    shutil.copytree(trained_run, run, ignore=shutil.ignore_patterns("eval"))  # other tests' evals left out
+    (run / "checkpoints" / "best.pt").unlink(missing_ok=True)
+    result = run_cli(f"run={run}", "episodes=1", "video=true", "video_length=0.1", module="ppo_torchrl.evaluate")
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert f"note: {run} has no best.pt (no eval saved one): using last.pt" in result.stderr
+    assert "frames (last)" in result.stdout and (run / "eval" / "last.mp4").is_file()
+    assert not (run / "eval" / "best.mp4").exists()
+    assert json.loads((run / "eval" / "eval.json").read_text())["checkpoint"] == "last"
+    shutil.copy(run / "checkpoints" / "last.pt", run / "checkpoints" / "best.pt")
+    (run / "checkpoints" / "last.pt").unlink()
+    result = run_cli(f"run={run}", "checkpoint=last", module="ppo_torchrl.evaluate")
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 2 and len(lines) == 1, result.stderr
+    assert "checkpoint=last:" in lines[0] and "best.pt (checkpoint=best)" in lines[0], lines[0]

@@ -1,0 +1,135 @@
+"""The training command's words, checked before Hydra sees them: Hydra's flags apart from the key=value
+overrides, and the mistakes a user of SB3, rl-zoo or CleanRL makes on the way in, each one line with
+the fix: `--env Hopper-v4` (overrides are key=value), `env=Hoper-v4` (the closest env file or
+Gymnasium id), `colector.total_frames=1000` (the closest key at that level of the config), and counts
+written `1e6` or `2e4` (taken as the integers they are where the config wants an int).
+"""
+
+from __future__ import annotations
+
+import difflib
+import re
+from typing import Optional
+
+from ppo_torchrl.errors import ConfigError
+
+# Hydra flags that print or inspect instead of running a job; those marked take a value.
+HELP_FLAGS = ("--help", "-h", "--hydra-help", "--version", "--shell-completion", "-sc")
+INFO_FLAGS = ("--cfg", "-c", "--info", "-i", "--resolve")
+VALUE_FLAGS = ("--cfg", "-c", "--package", "-p", "--config-path", "-cp", "--config-name", "-cn",
+               "--config-dir", "-cd", "--experimental-rerun")
+INFO_VALUES = ("all", "config", "defaults", "defaults-tree", "plugins", "searchpath")
+RUN_FLAGS = ("-m", "--multirun", "--run", "-r")
+# Other tools' argument names and this app's key for them (SB3 / rl-zoo / CleanRL).
+HABITS = {"env_id": "env", "algo": "loss", "total_timesteps": "collector.total_frames", "n_timesteps":
+          "collector.total_frames", "num_envs": "collector.num_envs", "n_envs": "collector.num_envs",
+          "learning_rate": "optim.lr", "n_steps": "collector.frames_per_batch", "n_epochs": "loss.epochs",
+          "update_epochs": "loss.epochs", "batch_size": "loss.minibatch_size", "gamma": "advantage.gamma",
+          "gae_lambda": "advantage.lmbda", "ent_coef": "loss.entropy_coef", "clip_range": "loss.clip_epsilon",
+          "clip_coef": "loss.clip_epsilon", "cuda": "device", "track": "logger", "capture_video": "eval.video"}
+SCIENTIFIC = re.compile(r"[+]?\d+(?:\.\d*)?[eE][+]?\d+")  # 1e6, 2.5e5, 1E+6: a count if it is a whole number
+
+
+def split_args(argv: list[str]) -> tuple[list[str], list[str]]:
+    """(Hydra flags with their values, key=value overrides). A flag Hydra does not have is the
+    `--key value` habit of other tools: one line that gives the override to write instead."""
+    flags, overrides, i = [], [], 0
+    while i < len(argv):
+        arg, following = argv[i], argv[i + 1] if i + 1 < len(argv) else None
+        takes_value = arg in VALUE_FLAGS or (arg in ("--info", "-i") and following in INFO_VALUES)
+        if arg.startswith("-") and arg not in (*HELP_FLAGS, *INFO_FLAGS, *VALUE_FLAGS, *RUN_FLAGS):
+            key, _, value = arg.lstrip("-").partition("=")
+            if not value and following is not None and "=" not in following and not following.startswith("-"):
+                value = following
+            name = key.replace("-", "_")
+            example = f"{HABITS.get(name, name)}={value or '<value>'}"
+            raise ConfigError(f"{arg}{' ' + following if value == following else ''}: the app takes key=value "
+                              f"overrides, not --key value; write {example} (python -m ppo_torchrl --help lists them)")
+        if arg.startswith("-"):
+            flags += [arg, following] if takes_value else [arg]
+        else:
+            overrides.append(arg)
+        i += 2 if arg.startswith("-") and takes_value else 1
+    return flags, overrides
+
+
+def closest(word: str, known) -> Optional[str]:
+    """The known name nearest to `word` (case aside), or None when nothing is near."""
+    lowered = {str(k).lower(): str(k) for k in known}
+    found = difflib.get_close_matches(word.lower(), list(lowered), n=1, cutoff=0.6)
+    return lowered[found[0]] if found else None
+
+
+def check_env_override(overrides: list[str]) -> None:
+    """`env=<name>` must name a file in conf/env: the closest file (or registered Gymnasium id) is named."""
+    from ppo_torchrl.envs import env_files
+
+    for arg in overrides:
+        if arg.startswith("env="):
+            available = env_files()
+            for name in arg.split("=", 1)[1].split(","):
+                if name not in available:
+                    raise ConfigError(f"env={name} has no config file{env_hint(name, available)}")
+
+
+def env_hint(name: str, available: list[str]) -> str:
+    import gymnasium as gym
+
+    files = [n for n in available if n != "gym"]
+    if name in gym.registry:
+        return f"; {name} is a Gymnasium id: env=gym env.id={name}"
+    near = closest(name, files + [i for i in gym.registry if "-v" in i and i not in files])
+    if near is not None:
+        return f"; did you mean env={near}?" if near in files else f"; did you mean env=gym env.id={near}?"
+    return f". Available: {', '.join(files)}; any other registered Gymnasium id: env=gym env.id=<id>"
+
+
+def key_hint(key: str, cfg) -> str:
+    """For a key the config does not have: `; did you mean collector.total_frames?` (the closest name at
+    the level where the key first leaves the config), or '' when nothing is near."""
+    from omegaconf import DictConfig
+
+    node, path = cfg, []
+    for part in key.lstrip("+~").split("."):
+        if not isinstance(node, DictConfig):
+            return ""
+        if part not in node:
+            near = closest(part, list(node.keys()))
+            rest = key.lstrip("+~").split(".")[len(path) + 1:]
+            return f"; did you mean {'.'.join([*path, near, *rest])}?" if near else ""
+        node, path = node.get(part), [*path, part]
+    return ""
+
+
+def whole_counts(argv: list[str], overrides: list[str], compose) -> tuple[list[str], list[str]]:
+    """`collector.total_frames=1e6` -> `collector.total_frames=1000000` where the config's field is an int
+    (rl-zoo's habit); a sweep's values too (`=1e5,2e5`). Anything else is left for Hydra to judge.
+    Returns (argv, overrides) with those values rewritten; `compose` gives the config of some overrides."""
+    from omegaconf import DictConfig, OmegaConf
+    from omegaconf.nodes import IntegerNode
+
+    written = [o for o in overrides if SCIENTIFIC.search(o.partition("=")[2])
+               and not o.startswith(("hydra.", "hydra/"))]
+    if not written:
+        return argv, overrides
+    cfg = compose([o for o in overrides if o.startswith(("env=", "experiment="))])
+    rewritten = {}
+    for arg in written:
+        key, _, value = arg.partition("=")
+        parent, _, leaf = key.lstrip("+~").rpartition(".")
+        try:
+            holder = OmegaConf.select(cfg, parent) if parent else cfg
+            is_int = isinstance(holder, DictConfig) and isinstance(holder._get_node(leaf), IntegerNode)
+        except Exception:  # noqa: BLE001 - not a key of the config: Hydra says so
+            is_int = False
+        if is_int:
+            rewritten[arg] = f"{key}={','.join(_whole(v) for v in value.split(','))}"
+    return [rewritten.get(a, a) for a in argv], [rewritten.get(o, o) for o in overrides]
+
+
+def _whole(value: str) -> str:
+    if SCIENTIFIC.fullmatch(value.strip()):
+        number = float(value)
+        if number.is_integer():
+            return str(int(number))
+    return value
