@@ -233,6 +233,29 @@ def tracking_camera(env_id: str) -> dict:
     return {"camera_name": TRACKING_CAMERA} if isinstance(creator, type) and issubclass(creator, MujocoEnv) else {}
 
 
+FLOOR_DRAWN_M = 500.0  # half-width a filmed floor is drawn to
+
+
+def floor_to_the_horizon(env) -> None:
+    """A MuJoCo plane collides everywhere but is drawn only within its size: Gymnasium's Hopper floor ends
+    at 20 m, which its best policies pass in 1000 steps and then hop over the void. For filming, planes are
+    drawn FLOOR_DRAWN_M wide, their texture repeated in proportion (the same squares); nothing the physics
+    reads changes."""
+    import mujoco
+
+    model = getattr(env, "model", None)
+    if model is None:
+        return
+    for g in np.flatnonzero(model.geom_type == mujoco.mjtGeom.mjGEOM_PLANE):
+        size = model.geom_size[g, :2].copy()
+        if size.min() <= 0 or size.min() >= FLOOR_DRAWN_M:  # 0: drawn without end already
+            continue
+        model.geom_size[g, :2] = FLOOR_DRAWN_M
+        material = model.geom_matid[g]
+        if material >= 0 and not model.mat_texuniform[material]:
+            model.mat_texrepeat[material] *= FLOOR_DRAWN_M / size
+
+
 def make_gym_env(env_cfg, render_mode: Optional[str] = None, evaluation: bool = False, **render_kwargs) -> gym.Env:
     kwargs = gym_make_kwargs(env_cfg, render_mode, evaluation, **render_kwargs)
     env_id = env_cfg.id
@@ -249,6 +272,8 @@ def make_gym_env(env_cfg, render_mode: Optional[str] = None, evaluation: bool = 
     except (gym.error.Error, ImportError, TypeError, ValueError) as exc:  # a missing extra, a bad make_kwargs
         first = next((l.strip() for l in str(exc).splitlines() if l.strip()), "")
         raise ConfigError(f"cannot make env '{env_cfg.id}': {type(exc).__name__}: {first}") from None
+    if render_mode is not None:
+        floor_to_the_horizon(env.unwrapped)
     if env_cfg.get("xml_file") and env_cfg.get("legged") is None:  # env=legged acts in [-1, 1] (robots/env.py)
         _ctrl_bounds_from_force(env, check_mjcf(resolve_model_file(env_cfg.xml_file)))
     if not isinstance(env.action_space, gym.spaces.Box):

@@ -121,7 +121,7 @@ class BackgroundEval:
         self._put({"frames": None, "actor": actor, "obs_stats": copy.deepcopy(obs_stats), "seeds": seeds[half:],
                    "seed": seed, "deterministic": True})
         mine = run_episodes(self._cfg, ac, obs_stats, seeds[:half], True, video_path,
-                            video_episodes=video_episodes, video_length=video_length)
+                            video_episodes=video_episodes, video_length=video_length, elsewhere=episodes - half)
         return summarize(self._cfg, merge_episodes(mine, self._receive(block=True)[1]))
 
     def _receive(self, block: bool):

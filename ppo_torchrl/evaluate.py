@@ -53,8 +53,10 @@ class EpisodeProgress:
     The ETA leaves filming out of the time per episode: film_s, the time spent rendering so far, counts
     once; film_left_s, the filming still to come (Filming.left_s), is added."""
 
-    def __init__(self, total: int, progress: Optional[bool], tty: Optional[bool] = None):
+    def __init__(self, total: int, progress: Optional[bool], tty: Optional[bool] = None, elsewhere: int = 0):
         self.total, self.start, self.last, self.shown = total, time.perf_counter(), -math.inf, False
+        # an eval shared with the background eval process: its episodes are said, not counted as ours
+        self.of = f"{total} episodes" + (f" (and {elsewhere} in the background eval process)" if elsewhere else "")
         self.quiet_s = math.inf if progress is False else 0.0 if progress else QUIET_S
         self.tty = sys.stderr.isatty() if tty is None else tty
 
@@ -68,7 +70,7 @@ class EpisodeProgress:
         if elapsed < self.quiet_s or (not self.tty and now - self.last < EVERY_S):
             return
         eta = max(elapsed - film_s, 0.0) / done * (self.total - done) + film_left_s
-        self._show(now, f"eval: {done}/{self.total} episodes, {elapsed:.0f} s elapsed, ETA {eta:.0f} s")
+        self._show(now, f"eval: {done}/{self.of}, {elapsed:.0f} s elapsed, ETA {eta:.0f} s")
 
     def filming(self, done: int, film: "Filming", lengths: Sequence[int]) -> None:
         """After each filmed frame: `eval: 0/10 episodes, filming episode 0: 120 frames (4.8 s of video),
@@ -80,7 +82,7 @@ class EpisodeProgress:
         if elapsed < min(self.quiet_s, EVERY_S) or quiet < (1.0 if self.tty else EVERY_S):
             return
         left = film.left_s(done, lengths)
-        self._show(now, f"eval: {done}/{self.total} episodes, filming episode {film.filmed[-1]}: {film.frames} "
+        self._show(now, f"eval: {done}/{self.of}, filming episode {film.filmed[-1]}: {film.frames} "
                         f"frames ({film.frames / film.fps:.1f} s of video), {elapsed:.0f} s elapsed"
                         + (f", filming left ~{left:.0f} s" if left else ""))
 
@@ -202,7 +204,8 @@ def merge_episodes(first: dict, second: dict) -> dict:
 @torch.no_grad()
 def run_episodes(cfg, ac: ActorCritic, obs_stats: Optional[dict], seeds: Sequence[int], deterministic: bool = True,
                  video_path: Optional[Path] = None, progress: Optional[bool] = None,
-                 video_episodes: Sequence[int] = (0,), video_length: Optional[float] = None) -> dict:
+                 video_episodes: Sequence[int] = (0,), video_length: Optional[float] = None,
+                 elsewhere: int = 0) -> dict:
     """One episode per seed (each starts from `env.set_seed(seed)`, so any subset of an eval's seeds
     gives the same episodes it gives there); the per-episode record that `summarize` reads. With
     video_path, episodes video_episodes (indices into seeds) are filmed: Filming."""
@@ -230,7 +233,7 @@ def run_episodes(cfg, ac: ActorCritic, obs_stats: Optional[dict], seeds: Sequenc
         loco.measure_gait = True
     try:
         with set_exploration_type(mode):
-            shown = EpisodeProgress(episodes, progress)
+            shown = EpisodeProgress(episodes, progress, elsewhere=elsewhere)
             for i, episode_seed in enumerate(seeds):
                 env.set_seed(episode_seed)
                 start = env.reset()
@@ -351,44 +354,49 @@ def gait_figures(gaits: list, speed_limit: Optional[float]) -> dict:
 
 
 def ended_line(result: dict) -> str:
-    """'8% end terminated (5% contact: trunk, 3% fall)'"""
-    reasons = ", ".join(f"{share:.0%} {why}" for why, share in result["termination_shares"].items())
+    """'8% end terminated (5% contact: trunk, 3% fall)'; an env that gives no reason: '8% end terminated'."""
+    reasons = ", ".join(f"{share:.0%} {why}" for why, share in result["termination_shares"].items()
+                        if why != "terminated")
     return f"{result['terminated_share']:.0%} end terminated" + (f" ({reasons})" if reasons else "")
 
 
 def motion_line(result: dict) -> str:
-    """'; forward velocity 0.52 +- 0.04 m/s[, 80% of episodes cross ... and are not terminated][; gait ...]' where
-    the env reports motion."""
-    if "forward_velocity_mean" not in result:
-        return ""
-    line = f"; forward velocity {result['forward_velocity_mean']:.2f} +- {result['forward_velocity_std']:.2f} m/s"
+    """The eval's figures after return and length, one topic a line (each starting '\n  '): where the robot went
+    (forward velocity where the env moves, the step's crossings, terminations), its gait, each foot, the pairs."""
+    lines = []
+    moving = "forward_velocity_mean" in result and (result["forward_velocity_mean"] or result["forward_velocity_std"]
+                                                    or "success_rate" in result)
     honest = (f"and are not terminated ({result['crossed_at_end_rate']:.0%} are beyond it at the end; "
               f"{ended_line(result)})") if "success_rate" in result else ""
+    went = [f"forward velocity {result['forward_velocity_mean']:.2f} +- {result['forward_velocity_std']:.2f} m/s"] \
+        if moving else []
     if "success_margin" in result:
-        line += (f", {result['success_rate']:.0%} of episodes cross the line {result['success_margin']} m beyond the "
-                 f"step ({result['step_height_mean'] * 100:.0f} cm on average) {honest}")
+        went.append(f"{result['success_rate']:.0%} of episodes cross the line {result['success_margin']} m beyond the "
+                    f"step ({result['step_height_mean'] * 100:.0f} cm on average) {honest}")
     elif "success_rate" in result:
-        line += f", {result['success_rate']:.0%} of episodes end beyond x={result['success_x']} m {honest}"
-    elif result["terminated_share"]:
-        line += f", {ended_line(result)}"
+        went.append(f"{result['success_rate']:.0%} of episodes end beyond x={result['success_x']} m {honest}")
+    elif result.get("terminated_share"):
+        went.append(ended_line(result))
+    if went:
+        lines.append(", ".join(went))
     if "stride_frequency" in result:
         limit = (f" (limit {result['joint_speed_limit']:g}, passed {result['over_speed_limit_share']:.2%} of the time)"
                  if "joint_speed_limit" in result else "")
-        line += (f"; gait: stride frequency {result['stride_frequency']:.1f} Hz, duty factor "
-                 f"{result['duty_factor']:.2f}, peak joint speed {result['peak_joint_speed']:.1f} rad/s{limit}, "
-                 f"a non-foot body on the ground {result['body_contact_share']:.0%} of the time")
+        lines.append(f"gait: stride frequency {result['stride_frequency']:.1f} Hz, duty factor "
+                     f"{result['duty_factor']:.2f}, peak joint speed {result['peak_joint_speed']:.1f} rad/s{limit}, "
+                     f"a non-foot body on the ground {result['body_contact_share']:.0%} of the time")
         if result["feet"]:
             feet = zip(result["feet"], result["foot_contact_share"], result["touchdown_frequency"],
                        result["longest_air_s"], result["longest_air_moving_s"])
-            line += ("; per foot, share of time on the ground, touchdowns/s and longest time in the air (s; of it "
-                     "while moving): " + ", ".join(f"{name} {share:.2f} {rate:.1f} {air:.2f} ({moving:.2f})"
-                                             for name, share, rate, air, moving in feet))
+            lines.append("per foot (share of time on the ground, touchdowns/s, longest time in the air in s (of it "
+                         "while moving)): " + ", ".join(f"{name} {share:.2f} {rate:.1f} {air:.2f} ({moving_s:.2f})"
+                                                        for name, share, rate, air, moving_s in feet))
         pairs = [(key[:-len("_pairs_together")].replace("_", " "), result[key]) for key in PAIR_KEYS
                  if result.get(key) is not None]
         if pairs:
-            line += ("; feet of a pair down together, of the time one is: " +
-                     ", ".join(f"{kind} {share:.2f}" for kind, share in pairs))
-    return line
+            lines.append("feet of a pair down together, of the time one is: " +
+                         ", ".join(f"{kind} {share:.2f}" for kind, share in pairs))
+    return "".join(f"\n  {line}" for line in lines)
 
 
 def parse_video_choices(episodes_text: str, length_text: str, episodes: int) -> tuple:
@@ -614,7 +622,7 @@ def main(argv: list[str]) -> dict:
         record(run_dir, writes)
     print(f"{label}: return {result['return_mean']:.1f} +- "
           f"{result['return_std']:.1f}, length {result['length_mean']:.0f} +- {result['length_std']:.0f} "
-          f"over {args['episodes']} episodes" + motion_line(result) + ("; " + video_line(result["video"])
+          f"over {args['episodes']} episodes" + motion_line(result) + ("\n  " + video_line(result["video"])
                                                                        if result["video"] else ""))
     return result
 

@@ -190,7 +190,7 @@ class Progress:
                 parts.append(f"eval {row['eval/return_mean']:8.1f} +- {row['eval/return_std']:.1f}")
             eta = self.eta_s()
             parts.append(f"eta {eta / 60:5.1f} min" if eta is not None else "eta after warm-up")
-            print(self.tag + " | ".join(parts), flush=True)
+            print(self.tag + " | ".join(parts), file=sys.stderr, flush=True)  # with start/done lines (and tqdm)
 
     def eta_s(self) -> Optional[float]:
         """Seconds left at the rate of the recent updates (the first one, which holds the compile warm-up

@@ -178,7 +178,7 @@ def plot_sweep(sweep_dir: Path) -> List[Path]:
     if not groups:
         raise ConfigError(f"{sweep_dir}: no finished runs to report")
     fig, ax = plt.subplots(figsize=(10, 6), constrained_layout=True)
-    rows = []
+    rows, shown = [], []
     common = set.intersection(*(set(key) for key in groups))  # the legend shows what varies, the title the rest
     for key, runs in sorted(groups.items()):
         varying = " ".join(a for a in key if a not in common) or ("all runs" if len(groups) == 1 else "(defaults)")
@@ -193,6 +193,7 @@ def plot_sweep(sweep_dir: Path) -> List[Path]:
         ax.fill_between(grid, mean - half, mean + half, alpha=0.2)
         final = np.asarray([s["train_return_last100"] for _, s in runs], float)
         evals = np.asarray([s["eval_return_mean"] if s["eval_return_mean"] is not None else np.nan for _, s in runs])
+        shown.append(varying)  # the table's group: what sets it apart (what every run shares heads the table)
         rows.append({
             "group": " ".join(key) or "(defaults)",
             "seeds": " ".join(str(s["seed"]) for _, s in sorted(runs, key=lambda r: r[1]["seed"])),
@@ -222,8 +223,11 @@ def plot_sweep(sweep_dir: Path) -> List[Path]:
         writer.writerows(rows)
     md = ["| group | seeds | frames | train return (last 100), mean +- sample std | eval return | SPS |",
           "|---|---|---|---|---|---|"]
-    md += [f"| {r['group']} | {r['seeds']} | {r['frames']:,} | {r['train_return_mean']:.1f} +- {r['train_return_std']:.1f} "
-           f"| {r['eval_return_mean']:.1f} +- {r['eval_return_std']:.1f} | {r['sps']:.0f} |" for r in rows]
+    md += [f"| {group} | {r['seeds']} | {r['frames']:,} | {r['train_return_mean']:.1f} +- {r['train_return_std']:.1f} "
+           f"| {r['eval_return_mean']:.1f} +- {r['eval_return_std']:.1f} | {r['sps']:.0f} |"
+           for group, r in zip(shown, rows)]
+    if common:
+        md = [f"Every run: `{' '.join(sorted(common))}`", ""] + md
     md_path = Path(sweep_dir) / "sweep_report.md"
     md_path.write_text("\n".join(md) + "\n" + "".join(f"\n{line}" for line in skipped) + ("\n" if skipped else ""))
     print("\n".join(md))
@@ -232,12 +236,14 @@ def plot_sweep(sweep_dir: Path) -> List[Path]:
 
 def main(argv: List[str]) -> List[Path]:
     """A run dir gets report.png; a multirun (sweep) dir gets sweep_report.{png,md,csv}."""
-    usage = "python -m ppo_torchrl.report <run dir or sweep dir>"
+    usage = "python -m ppo_torchrl.report <run dir or sweep dir | latest | latest/<env>>"
     if "--help" in argv or "-h" in argv:
         from ppo_torchrl.cli import print_help
 
         print_help(usage, {"<run dir or sweep dir>": ("a run dir gets report.png, a sweep (multirun) dir "
-                                                       "sweep_report.png, .md and .csv", None)},
+                                                       "sweep_report.png, .md and .csv; latest (or latest/<env>, "
+                                                       "e.g. latest/Hopper-v4) is the newest run under outputs/",
+                                                       None)},
                    "Plots a run's returns and PPO diagnostics against frames, or a sweep's return curves (mean and\n"
                    "95% CI over seeds) and final returns per group of runs that differ only in seed.")
     if len(argv) != 1:

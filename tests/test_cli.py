@@ -19,7 +19,7 @@ def test_multirun_over_seeds(tmp_path):
     assert seeds == [1, 2]
     for p in summaries:
         assert (p.parent / "config.yaml").is_file() and (p.parent / "metrics.csv").is_file()
-    progress = [line for line in result.stdout.splitlines() if "frames " in line and "| sps" in line]
+    progress = [line for line in result.stderr.splitlines() if "frames " in line and "| sps" in line]
     assert progress and all(line.startswith(("[#0] frames", "[#1] frames")) for line in progress)
     line = result.stderr.splitlines()[-1]  # the sweep's last line: where it is and the command that compares the runs
     assert line.startswith(f"sweep: 2 of 2 runs finished in {tmp_path}; compare them: ")

@@ -68,6 +68,6 @@ def test_the_eta_leaves_the_warm_up_out(capsys, monkeypatch):
     progress = loggers.Progress(total_frames=100_000, start_frames=0, every_s=0.0, tty=False)
     for frames in (1000, 2000, 3000):
         progress.update({"frames": frames, "sps": frames / 60}, 1000, force=False)
-    lines = capsys.readouterr().out.splitlines()
+    lines = capsys.readouterr().err.splitlines()  # with the start and done lines
     assert lines[0].endswith("eta after warm-up"), lines
     assert lines[2].endswith("eta   1.6 min"), lines  # 97,000 frames at 1000/s, not at the mean's 50/s

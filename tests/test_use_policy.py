@@ -239,7 +239,7 @@ def test_progress_plain_lines_off_a_terminal(capsys):
     progress.update(row, 500, force=False)  # first call prints
     progress.update({**row, "frames": 750}, 250, force=False)  # within every_s: silent
     progress.update({**row, "frames": 1000}, 250, force=True)
-    lines = capsys.readouterr().out.strip().splitlines()
+    lines = capsys.readouterr().err.strip().splitlines()
     assert len(lines) == 2 and "frames       500/1000" in lines[0] and "eta" in lines[0]
 
 
@@ -294,3 +294,28 @@ def test_checkpoint_fallbacks_say_what_was_loaded(trained_run, tmp_path):
     lines = result.stderr.strip().splitlines()
     assert result.returncode == 2 and len(lines) == 1, result.stderr
     assert "checkpoint=last:" in lines[0] and "best.pt (checkpoint=best)" in lines[0], lines[0]
+
+
+def test_a_filmed_floor_reaches_past_where_the_best_policies_hop():
+    """Issue 49: Gymnasium's Hopper floor is drawn to 20 m and the zoo Hopper ends at ~21 m: filmed, the floor
+    is drawn far wider, the same checker under the robot at 30 m as at the start, and the physics unchanged."""
+    import mujoco
+    from conftest import compose_config
+
+    from ppo_torchrl.envs import make_gym_env
+
+    cfg = compose_config(["env=Hopper-v4"])
+    env = make_gym_env(cfg.env, "rgb_array", width=160, height=120)
+    plain = make_gym_env(cfg.env)
+    env.reset(seed=0)
+    bottom = {}
+    for x in (0.0, 30.0):
+        env.unwrapped.data.qpos[0] = x
+        mujoco.mj_forward(env.unwrapped.model, env.unwrapped.data)
+        bottom[x] = env.render()[-10:].reshape(-1, 3).astype(float)
+    env.close()
+    assert abs(bottom[30.0].mean(0) - bottom[0.0].mean(0)).max() < 5  # floor, not the sky (34, 44, 52 before)
+    assert bottom[30.0].std() > 40  # the checker's squares
+    filmed, unfilmed = env.unwrapped.model, plain.unwrapped.model
+    assert filmed.geom_size[0, 0] == 500 and unfilmed.geom_size[0, 0] == 20  # only the drawn size changed
+    plain.close()
