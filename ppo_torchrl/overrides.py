@@ -8,6 +8,7 @@ written `1e6` or `2e4` (taken as the integers they are where the config wants an
 from __future__ import annotations
 
 import difflib
+import os
 import re
 from typing import Optional
 
@@ -27,6 +28,10 @@ HABITS = {"env_id": "env", "algo": "loss", "total_timesteps": "collector.total_f
           "update_epochs": "loss.epochs", "batch_size": "loss.minibatch_size", "gamma": "advantage.gamma",
           "gae_lambda": "advantage.lmbda", "ent_coef": "loss.entropy_coef", "clip_range": "loss.clip_epsilon",
           "clip_coef": "loss.clip_epsilon", "cuda": "device", "track": "logger", "capture_video": "eval.video"}
+# Keys whose value is a path: passed to Hydra through an environment variable, so any character a path
+# may hold (a quote, a space, non-ASCII) reaches the app as typed, run after run and on resume.
+PATH_KEYS = ("resume", "init_from", "hydra.run.dir", "hydra.sweep.dir")
+PATH_ENV = "PPO_TORCHRL_PATH_{}"
 SCIENTIFIC = re.compile(r"[+]?\d+(?:\.\d*)?[eE][+]?\d+")  # 1e6, 2.5e5, 1E+6: a count if it is a whole number
 
 
@@ -133,3 +138,32 @@ def _whole(value: str) -> str:
         if number.is_integer():
             return str(int(number))
     return value
+
+
+def path_override(key: str, value) -> str:
+    """`key=${oc.env:...}`: the path as typed, whatever characters it holds (see PATH_KEYS)."""
+    name = PATH_ENV.format(key.replace(".", "_").upper())
+    os.environ[name] = str(value)
+    return f"{key}=${{oc.env:{name}}}"
+
+
+def unquote(value: str) -> str:
+    """A value the user quoted for Hydra ('...' or "..."), as the path it names."""
+    if len(value) >= 2 and value[0] == value[-1] and value[0] in "'\"":
+        return value[1:-1].replace("\\" + value[0], value[0])
+    return value
+
+
+def route_paths(argv: list[str]) -> list[str]:
+    """Path-valued overrides go to Hydra through environment variables (PATH_KEYS)."""
+    out = []
+    for arg in argv:
+        key, sep, value = arg.partition("=")
+        if sep and key in PATH_KEYS and "${" not in value:  # an interpolation (${now:...}) stays Hydra's
+            arg = path_override(key, unquote(value))
+        out.append(arg)
+    return out
+
+
+def with_override(argv: list[str], key: str, value) -> list[str]:
+    return [a for a in argv if not a.startswith(f"{key}=")] + [path_override(key, value)]

@@ -182,7 +182,7 @@ def test_latest_skips_runs_in_use_failed_and_damaged_and_prefers_finished_ones(t
     (["env=mjcf", "env.xml_file=quadruped_a1like.xml"], "quadruped_a1like"),
 ])
 def test_run_dirs_are_named_by_the_preset_or_env_file(overrides, name):
-    from ppo_torchrl.__main__ import compose, hydra_value
+    from ppo_torchrl.compose import compose, hydra_value
 
     run_dir = hydra_value(compose([*overrides, "seed=4"], with_hydra=True), "hydra.run.dir")
     assert run_dir.startswith("outputs/runs/") and run_dir.endswith(f"_{name}_seed4")

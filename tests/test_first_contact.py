@@ -3,7 +3,8 @@ written 1e6; the learning-rate schedule of an extended run."""
 
 import pytest
 
-from ppo_torchrl.__main__ import compose, prepare
+from ppo_torchrl.__main__ import prepare
+from ppo_torchrl.compose import compose
 from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.overrides import whole_counts
 

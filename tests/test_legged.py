@@ -69,7 +69,7 @@ def test_each_robot_stands_for_two_seconds_at_its_derived_pose_under_its_derived
     """The env's own start (no reset noise) and drives (action 0 holds the standing pose): the trunk stays
     within 20% of its standing height and tilts under 30 degrees, with only its feet (and A1's calves,
     Menagerie's geometry) on the floor."""
-    from ppo_torchrl.__main__ import compose
+    from ppo_torchrl.compose import compose
     from ppo_torchrl.envs import make_gym_env
 
     cfg = compose(["env=legged", f"env.xml_file={scene(folder)}", "env.locomotion.reset_noise_scale=0"])
@@ -99,7 +99,7 @@ def test_torque_motors_become_pd_servos_around_the_standing_pose_with_gains_from
     robot = read_robot(scene("unitree_go2"))
     assert robot.kp[2] == pytest.approx(45.43 / PD_SATURATION_RAD)
     assert all(kd > 0 for kd in robot.kd)
-    from ppo_torchrl.__main__ import compose
+    from ppo_torchrl.compose import compose
     from ppo_torchrl.envs import make_gym_env
 
     env = make_gym_env(compose(["env=legged", f"env.xml_file={scene('unitree_go2')}"]).env).unwrapped
@@ -115,7 +115,7 @@ def test_torque_motors_become_pd_servos_around_the_standing_pose_with_gains_from
 def test_the_step_is_added_to_a_model_that_has_none_at_a_quarter_leg_length_and_faces_the_heading():
     """ANYmal B faces -x: its step (0.25 l = 14.7 cm in evaluation) lies ahead of it, made by MjSpec at build
     time; the model file is not touched."""
-    from ppo_torchrl.__main__ import compose
+    from ppo_torchrl.compose import compose
     from ppo_torchrl.envs import make_gym_env
 
     before = scene("anybotics_anymal_b").read_bytes(), (ROBOTS_DIR / "anybotics_anymal_b" / "anymal_b.xml").read_bytes()

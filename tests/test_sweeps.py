@@ -57,7 +57,7 @@ def test_optuna_search_runs_trials_and_prints_the_best(tmp_path, capsys):
 
     study = optuna.load_study(study_name=name, storage=storage)
     assert len(study.trials) == 2  # stored: running the command again resumes this study, and says so
-    from ppo_torchrl.__main__ import announce_study
+    from ppo_torchrl.sweeps import announce_study
 
     announce_study(compose_config(args, return_hydra_config=True), args + space)  # the same command: resumed
     assert capsys.readouterr().err == f"optuna: resuming study {name} with 2 trials in {storage}\n"
@@ -74,7 +74,7 @@ def test_a_multi_seed_study_trains_each_tuning_seed_and_maximizes_their_mean(tmp
     seeds = [json.loads((trial.parent / f"seed{k}" / "summary.json").read_text()) for k in (6, 7)]
     assert [s["seed"] for s in seeds] == [6, 7] and all(s["status"] == "finished" for s in seeds)
     record = json.loads(trial.read_text())
-    from ppo_torchrl.__main__ import objective
+    from ppo_torchrl.sweeps import objective
 
     assert record["objective"] == [objective(s) for s in seeds]  # the final eval here (TINY), else the last 100
     import optuna
@@ -199,7 +199,7 @@ def test_a_stored_study_with_another_space_is_refused_and_stale_trials_are_faile
     and leave it RUNNING); trials an interrupted sweep left RUNNING are marked failed."""
     import optuna
 
-    from ppo_torchrl.__main__ import check_stored_study
+    from ppo_torchrl.sweeps import check_stored_study
     from ppo_torchrl.errors import ConfigError
 
     study = optuna.create_study(direction="maximize")
