@@ -14,7 +14,8 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type
 
 from ppo_torchrl import export, report
 from ppo_torchrl.checkpoint import load_policy
-from ppo_torchrl.evaluate import EpisodeProgress, evaluate_policy
+from ppo_torchrl.evaluate import evaluate_policy
+from ppo_torchrl.filming import EpisodeProgress
 from ppo_torchrl.loggers import Progress
 from ppo_torchrl.trainer import Trainer
 
@@ -93,7 +94,7 @@ def test_video_follows_the_robot_at_real_time(tmp_path):
     from conftest import compose_config
 
     from ppo_torchrl.envs import gym_make_kwargs, make_gym_env
-    from ppo_torchrl.evaluate import Filming
+    from ppo_torchrl.filming import Filming
 
     cfg = compose_config(["env=Hopper-v4"])
     assert gym_make_kwargs(cfg.env, "rgb_array")["camera_name"] == "track"
@@ -144,7 +145,7 @@ def test_filming_talks_while_it_renders(tmp_path, capsys):
     from conftest import compose_config
 
     from ppo_torchrl.envs import make_gym_env
-    from ppo_torchrl.evaluate import Filming
+    from ppo_torchrl.filming import Filming
 
     env = make_gym_env(compose_config(["env=InvertedPendulum-v4"]).env, "rgb_array", width=64, height=48)
     film = Filming(tmp_path / "p.mp4", env, which=[0])
