@@ -107,11 +107,10 @@ def key_hint(key: str, cfg) -> str:
 
 
 def whole_counts(argv: list[str], overrides: list[str], compose) -> tuple[list[str], list[str]]:
-    """`collector.total_frames=1e6` -> `collector.total_frames=1000000` where the config's field is an int
+    """`collector.total_frames=1e6` -> `collector.total_frames=1000000` where the config holds an int there
     (rl-zoo's habit); a sweep's values too (`=1e5,2e5`). Anything else is left for Hydra to judge.
     Returns (argv, overrides) with those values rewritten; `compose` gives the config of some overrides."""
     from omegaconf import DictConfig, OmegaConf
-    from omegaconf.nodes import IntegerNode
 
     written = [o for o in overrides if SCIENTIFIC.search(o.partition("=")[2])
                and not o.startswith(("hydra.", "hydra/"))]
@@ -124,7 +123,7 @@ def whole_counts(argv: list[str], overrides: list[str], compose) -> tuple[list[s
         parent, _, leaf = key.lstrip("+~").rpartition(".")
         try:
             holder = OmegaConf.select(cfg, parent) if parent else cfg
-            is_int = isinstance(holder, DictConfig) and isinstance(holder._get_node(leaf), IntegerNode)
+            is_int = isinstance(holder, DictConfig) and OmegaConf.get_type(holder, leaf) is int  # (an int now)
         except Exception:  # noqa: BLE001 - not a key of the config: Hydra says so
             is_int = False
         if is_int:
