@@ -68,7 +68,9 @@ def continued_schedule(state: dict, cfg, num_iterations: int) -> tuple:
     i = state["iteration"]
     if old_n != num_iterations and cfg.optim.anneal_lr and 0 < i <= old_n and i - 1 >= a:
         a, lr_a = i - 1, lr_a * (1.0 - (i - 1 - a) / (old_n - a))  # the lr the last update used
-    return a, lr_a * cfg.optim.lr / old_lr if old_lr else lr_a
+    if cfg.optim.lr == old_lr or not old_lr:  # the same lr: the saved anchor as it is (a bit-exact resume)
+        return a, lr_a
+    return a, lr_a * cfg.optim.lr / old_lr
 
 
 class Trainer:
@@ -259,8 +261,7 @@ class Trainer:
         last iteration."""
         cfg = self.cfg.optim
         a, lr_a = self.lr_anchor
-        frac = 1.0 - (self.iteration - a) / (self.num_iterations - a) if cfg.anneal_lr else 1.0
-        lr = lr_a * frac if cfg.anneal_lr else cfg.lr
+        lr = lr_a * (1.0 - (self.iteration - a) / (self.num_iterations - a)) if cfg.anneal_lr else cfg.lr
         for group in self.optimizer.param_groups:
             group["lr"] = lr
         return lr
