@@ -343,13 +343,16 @@ def sweep_row(height: float, episodes: int, result: dict) -> dict:
     return row
 
 
-def height_sweep(cfg, ac, obs_stats, heights: list[float], episodes: int, seed: int, out_dir: Path, title: str) -> list:
+def height_sweep(cfg, ac, obs_stats, heights: list[float], episodes: int, seed: int, out_dir: Path, title: str,
+                 owner: Optional[Path] = None) -> list:
     """Evaluate at each fixed step height; write height_sweep.csv (a row per height), the success-rate curve
     height_sweep.png, height_sweep_episodes.csv (a row per episode: crossed, terminated and why, length and
-    EPISODE_FOOT_KEYS per foot) and height_sweep.json (each height's eval result, eval.json's figures)."""
+    EPISODE_FOOT_KEYS per foot) and height_sweep.json (each height's eval result, eval.json's figures).
+    owner: the run dir whose manifest lists them (rundir.atomic_write_bytes)."""
     import csv
+    import io
 
-    from ppo_torchrl.rundir import atomic_write_json
+    from ppo_torchrl.rundir import atomic_write_bytes, atomic_write_json
 
     rows, results, per_episode = [], [], []
     for height in heights:
@@ -373,12 +376,13 @@ def height_sweep(cfg, ac, obs_stats, heights: list[float], episodes: int, seed: 
     out_dir.mkdir(parents=True, exist_ok=True)
     for name, table in ((SWEEP_FILES[0], rows), (SWEEP_FILES[2], per_episode)):
         columns = list(dict.fromkeys(k for row in table for k in row))  # a reason met at one height only: 0 elsewhere
-        with open(out_dir / name, "w", newline="") as f:
-            writer = csv.DictWriter(f, fieldnames=columns, restval=0.0 if name == SWEEP_FILES[0] else "")
-            writer.writeheader()
-            writer.writerows(table)
+        text = io.StringIO(newline="")
+        writer = csv.DictWriter(text, fieldnames=columns, restval=0.0 if name == SWEEP_FILES[0] else "")
+        writer.writeheader()
+        writer.writerows(table)
+        atomic_write_bytes(out_dir / name, lambda f: f.write(text.getvalue().encode()), owner)
     atomic_write_json(out_dir / SWEEP_FILES[3], {"title": title, "episodes": episodes, "seed": seed,
-                                                 "heights": results})
+                                                 "heights": results}, owner)
     import matplotlib
 
     matplotlib.use("Agg")
@@ -393,7 +397,7 @@ def height_sweep(cfg, ac, obs_stats, heights: list[float], episodes: int, seed: 
     ax.set_title(title, fontsize=8)
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(out_dir / SWEEP_FILES[1], dpi=120)
+    atomic_write_bytes(out_dir / SWEEP_FILES[1], lambda f: fig.savefig(f, format="png", dpi=120), owner)
     plt.close(fig)
     print(f"per episode: {out_dir / SWEEP_FILES[2]}; every figure: {out_dir / SWEEP_FILES[3]}")
     return rows
@@ -404,7 +408,8 @@ def main(argv: list[str]) -> dict:
     from ppo_torchrl.checkpoint import label as checkpoint_label
     from ppo_torchrl.cli import parse_args, resolve_run
     from ppo_torchrl.envs import env_spec
-    from ppo_torchrl.rundir import atomic_write_json, check_replaceable, is_run, output_dir_for, record, unwritable
+    from ppo_torchrl.rundir import (atomic_write_json, check_replaceable, intend, is_run, output_dir_for, record,
+                                    unwritable)
 
     usage = ("python -m ppo_torchrl.evaluate run=<run dir> [checkpoint=best|last|<file>] [episodes=10] [video=false] "
              "[video_episodes=0] [video_length=<s>] [seed=0] [heights=<m,m,...> [out=<dir>]] [env.<key>=<value> ...]")
@@ -464,18 +469,20 @@ def main(argv: list[str]) -> dict:
     if heights:
         heights = heights_in_metres(heights, cfg.env)
         rows = height_sweep(cfg, ac, obs_stats, heights, args["episodes"], args["seed"], out_dir,
-                            f"{run_dir.resolve().name}\n{label}")
+                            f"{run_dir.resolve().name}\n{label}", owner=run_dir)
         print(f"{label}: height sweep over {args['episodes']} episodes per height: "
               f"{out_dir / SWEEP_FILES[0]}, {out_dir / SWEEP_FILES[1]}")
         if is_run(run_dir):
             record(run_dir, writes)
         return {"heights": rows}
+    if args["video"]:
+        intend(run_dir, [video])  # imageio writes the mp4 in place: listed first, a cut one is the app's
     result = evaluate_policy(cfg, ac, obs_stats, args["episodes"], seed=args["seed"],
                              video_path=video if args["video"] else None, progress=True,
                              video_episodes=video_episodes, video_length=video_length)
     result.update(env=env_label(cfg.env), checkpoint=which, checkpoint_frames=state["frames"],
                   episodes=args["episodes"], video=result.get("video"), overrides=overrides)
-    atomic_write_json(out_dir / "eval.json", result)
+    atomic_write_json(out_dir / "eval.json", result, owner=run_dir)
     if is_run(run_dir):
         record(run_dir, writes)
     print(f"{label}: return {result['return_mean']:.1f} +- "

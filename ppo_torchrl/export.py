@@ -20,6 +20,7 @@ from torch import nn
 from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.models import ActorCritic, to_bounds
 from ppo_torchrl.normalization import make_observation_normalizer
+from ppo_torchrl.rundir import atomic_write_bytes
 
 
 class DeployedPolicy(nn.Module):
@@ -41,7 +42,7 @@ class DeployedPolicy(nn.Module):
         return to_bounds(self.policy_net(self.normalize(obs).float())[0], self.low, self.high, self.squash)
 
 
-def export_policy(cfg, ac: ActorCritic, obs_stats: Optional[dict], path: Path) -> Path:
+def export_policy(cfg, ac: ActorCritic, obs_stats: Optional[dict], path: Path, owner: Optional[Path] = None) -> Path:
     t = cfg.env.transforms
     if t.extra:  # a user's TorchRL transform (CatFrames keeps a frame buffer) cannot be baked in here
         target = t.extra[0].get("_target_", "?")
@@ -55,8 +56,7 @@ def export_policy(cfg, ac: ActorCritic, obs_stats: Optional[dict], path: Path) -
     example = torch.zeros(2, obs_dim)
     with torch.no_grad():
         scripted = torch.jit.trace(module, example)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    scripted.save(str(path))
+    atomic_write_bytes(path, lambda f: torch.jit.save(scripted, f), owner)  # a kill: the old file or the new one
     return path
 
 
@@ -80,7 +80,7 @@ def main(argv: list[str]) -> Path:
     why = unwritable(target.parent)
     if why:
         raise ConfigError(f"cannot write {target}: {why}; copy the run dir somewhere writable")
-    path = export_policy(cfg, ac, state["normalization"]["obs"], target)
+    path = export_policy(cfg, ac, state["normalization"]["obs"], target, owner=run_dir)
     if is_run(run_dir):
         record(run_dir, [path])
     print(f"exported {cfg.env.id} policy ({label(checkpoint)}, {state['frames']} frames) to {path}")

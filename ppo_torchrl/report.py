@@ -16,11 +16,12 @@ left out with a line saying which.
 from __future__ import annotations
 
 import csv
+import io
 from pathlib import Path
 from typing import Dict, List
 
 from ppo_torchrl.errors import ConfigError
-from ppo_torchrl.rundir import check_replaceable, is_run, record, unwritable
+from ppo_torchrl.rundir import atomic_write_bytes, check_replaceable, is_run, record, unwritable
 
 PANELS = [
     ("train/entropy", "policy entropy"),
@@ -127,7 +128,7 @@ def plot_run(run_dir: Path) -> Path:
 
     fig = run_figure(run_dir)
     out = Path(run_dir) / "report.png"
-    fig.savefig(out, dpi=90)
+    atomic_write_bytes(out, lambda f: fig.savefig(f, format="png", dpi=90), owner=run_dir)
     plt.close(fig)
     return out
 
@@ -213,14 +214,15 @@ def plot_sweep(sweep_dir: Path) -> List[Path]:
     ax.grid(alpha=0.3)
     ax.legend(loc="best", fontsize=8)
     png = Path(sweep_dir) / "sweep_report.png"
-    fig.savefig(png, dpi=90)
+    atomic_write_bytes(png, lambda f: fig.savefig(f, format="png", dpi=90), owner=sweep_dir)
     plt.close(fig)
 
     csv_path = Path(sweep_dir) / "sweep_report.csv"
-    with open(csv_path, "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
+    table = io.StringIO(newline="")
+    writer = csv.DictWriter(table, fieldnames=list(rows[0]))
+    writer.writeheader()
+    writer.writerows(rows)
+    atomic_write_bytes(csv_path, lambda f: f.write(table.getvalue().encode()), owner=sweep_dir)
     md = ["| group | seeds | frames | train return (last 100), mean +- sample std | eval return | SPS |",
           "|---|---|---|---|---|---|"]
     md += [f"| {group} | {r['seeds']} | {r['frames']:,} | {r['train_return_mean']:.1f} +- {r['train_return_std']:.1f} "
@@ -229,7 +231,8 @@ def plot_sweep(sweep_dir: Path) -> List[Path]:
     if common:
         md = [f"Every run: `{' '.join(sorted(common))}`", ""] + md
     md_path = Path(sweep_dir) / "sweep_report.md"
-    md_path.write_text("\n".join(md) + "\n" + "".join(f"\n{line}" for line in skipped) + ("\n" if skipped else ""))
+    text = "\n".join(md) + "\n" + "".join(f"\n{line}" for line in skipped) + ("\n" if skipped else "")
+    atomic_write_bytes(md_path, lambda f: f.write(text.encode()), owner=sweep_dir)
     print("\n".join(md))
     return [png, md_path, csv_path]
 

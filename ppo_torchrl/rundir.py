@@ -71,9 +71,12 @@ def _files(directory: Path) -> List[str]:
     return sorted(found)
 
 
-def atomic_write_bytes(path: Path, write) -> None:
+def atomic_write_bytes(path: Path, write, owner: Optional[Path] = None) -> None:
     """Call write(file) on a temp file in path's folder, fsync it, then rename it onto path. An OSError
-    (a full disk, no permission) names `path`, so the one error line says where."""
+    (a full disk, no permission) names `path`, so the one error line says where.
+    owner: the run dir an output of evaluate, export or report goes to: `path` is listed in its manifest
+    between the whole temp file and the rename (`intend`), so a failure before changes nothing and a kill
+    at any instant leaves the old file or the new one, the app's either way."""
     path = Path(path)
     tmp = None
     try:
@@ -84,6 +87,8 @@ def atomic_write_bytes(path: Path, write) -> None:
             f.flush()
             os.fsync(f.fileno())
         os.chmod(tmp, 0o644)  # mkstemp makes files private; these are ordinary outputs
+        if owner is not None:
+            intend(owner, [path])
         os.replace(tmp, path)
     except BaseException as exc:
         if tmp is not None and os.path.exists(tmp):
@@ -93,8 +98,8 @@ def atomic_write_bytes(path: Path, write) -> None:
         raise
 
 
-def atomic_write_json(path: Path, data: dict) -> None:
-    atomic_write_bytes(path, lambda f: f.write((json.dumps(data, indent=2, default=float) + "\n").encode()))
+def atomic_write_json(path: Path, data: dict, owner: Optional[Path] = None) -> None:
+    atomic_write_bytes(path, lambda f: f.write((json.dumps(data, indent=2, default=float) + "\n").encode()), owner)
 
 
 def listed(directory: Path) -> Optional[List[str]]:
@@ -130,6 +135,21 @@ def record(directory: Path, files: Optional[List[Path]] = None) -> None:
             pass
     kept = sorted(f for f in listed_now if isinstance(f, str) and _inside(directory, f) and (directory / f).is_file())
     atomic_write_json(directory / MANIFEST, {"app": "ppo_torchrl", "files": kept})
+
+
+def intend(directory: Path, paths: List[Path]) -> None:
+    """Just before evaluate, export or report write `paths` in a run dir (every check passed): list them first
+    (write-ahead), so a kill in the middle of a write leaves a file the manifest calls the app's (the next
+    command replaces it), never one that looks like the user's. A name whose file never came is dropped by
+    the next `record`."""
+    directory = Path(directory)
+    if not is_run(directory) or shipped(directory):
+        return
+    root, names = directory.resolve(), set(listed(directory) or [])
+    new = {name for name in (Path(os.path.relpath(Path(path).resolve(), root)).as_posix() for path in paths)
+           if not name.startswith("../") and name != ".." and _inside(directory, name)} - names
+    if new:
+        atomic_write_json(directory / MANIFEST, {"app": "ppo_torchrl", "files": sorted(names | new)})
 
 
 def _inside(directory: Path, name: str) -> bool:
@@ -212,9 +232,9 @@ def check_new_dir(directory: Path, overwrite: bool, what: str = "run") -> None:
         return
     if not [f for f in _files(directory) if f != LEGACY_LOCK] and not _job_dirs(directory):
         return  # empty (empty folders, a stale lock file of an earlier version): a new run may use it
-    if what == "run":
+    if what == "run" or is_run(directory):  # a dir with a manifest (a run's, a trial's, a sweep's) answers by it
         foreign, has_run = foreign_files(directory), is_run(directory)
-    else:  # a sweep: its own files, and job dirs that are each a run dir (or empty)
+    else:  # a sweep dir of an earlier version: its own files, and job dirs that are each a run dir (or empty)
         foreign = [f for f in foreign_files(directory) if "/" not in f]
         for job in _job_dirs(directory):
             if _files(job):

@@ -280,3 +280,24 @@ def test_a_dead_worker_ends_any_wait_of_the_main_process(tmp_path):
     pid = int(next(line for line in out.splitlines() if line.startswith("killed")).split()[1])
     assert f"raised collector worker 1 (pid {pid}) died (killed by SIGKILL)" in out, out
     assert "other -9" in out  # the other worker is stopped too (SIGKILL): nothing is left to wait for
+
+
+def test_a_sweep_into_a_run_dir_is_told_it_holds_a_run_not_foreign_files(tmp_path):
+    """A `-m` sweep whose hydra.sweep.dir is a run (a trial's, with .hydra/ and seed<k>/ runs) answers by the
+    dir's manifest: 'already holds', with overwrite=true to replace it, not 'files this app did not write'."""
+    from ppo_torchrl import rundir
+    from ppo_torchrl.errors import ConfigError
+
+    run = tmp_path / "trial"
+    rundir.claim(run)
+    rundir.atomic_write_bytes(run / ".hydra" / "config.yaml", lambda f: f.write(b"{}\n"))
+    rundir.commit(run)
+    seed = run / "seed1"
+    rundir.claim(seed)
+    rundir.atomic_write_bytes(seed / "summary.json", lambda f: f.write(b"{}\n"))
+    rundir.commit(seed)
+    rundir.release(seed)
+    rundir.release(run)
+    with pytest.raises(ConfigError, match="already holds a sweep.*overwrite=true"):
+        rundir.check_new_dir(run, overwrite=False, what="sweep")
+    rundir.check_new_dir(run, overwrite=True, what="sweep")  # replaceable
