@@ -26,7 +26,8 @@ from ppo_torchrl.normalization import (
     make_observation_normalizer,
     make_reward_normalizer,
 )
-from ppo_torchrl.positions import GymEnvs, resumable
+from ppo_torchrl.env_state import EnvState
+from ppo_torchrl.positions import resumable
 
 # Gymnasium's v4 MuJoCo envs warn on every make that v5 exists; the warning is not actionable here.
 warnings.filterwarnings("ignore", message=".*is out of date.*")
@@ -363,8 +364,9 @@ def make_torchrl_env(
     **render_kwargs,
 ) -> TransformedEnv:
     """`TransformedEnv(GymWrapper(gymnasium env))` with the configured transforms: the card's pipeline,
-    which TorchRL's Collector steps and whose state the fast collector uses (positions.GymEnvs,
-    normalization.ObservationNormalization / RewardNormalization: the one owner of each).
+    which TorchRL's Collector steps and the fast collector steps in numpy. Its first transform, `EnvState`
+    (env_state.py), owns the env-side state: the Gymnasium envs, both normalizers, the episode counters,
+    the env metrics and the positions.
 
     train=True: running statistics (or fixed ones fitted on random rollouts) and reward normalization,
     as a collector needs them; `obs_stats` (init_from) start them.
@@ -394,14 +396,15 @@ def make_torchrl_env(
         fit_env = make_gym_env(env_cfg)
         obs_norm.fit_fixed(fit_env, t.obs_norm_init_frames, 0 if seed is None else seed)
         fit_env.close()
-    transforms = [GymEnvs(gym_envs)]
+    reward_norm = make_reward_normalizer(t, num_envs, gamma) if train else None
+    transforms = [EnvState(gym_envs, obs_norm, reward_norm)]
     if clip_actions:  # Normal head: the env gets the clipped action, the batch keeps the sample
         spec = base.action_spec
         transforms.append(ClipActionToBounds(spec.space.low, spec.space.high))
     transforms.append(ObservationNormalization(obs_norm))  # float64 in, float32 out
     transforms += extra_transforms(env_cfg)
     if train:
-        transforms.append(RewardNormalization(make_reward_normalizer(t, num_envs, gamma)))
+        transforms.append(RewardNormalization(reward_norm))
     return TransformedEnv(base, Compose(*transforms))
 
 

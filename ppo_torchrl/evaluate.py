@@ -30,7 +30,7 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type
 
 from ppo_torchrl.envs import env_label, episode_seeds, make_torchrl_env
 from ppo_torchrl.filming import VIDEO_SIZE, EpisodeProgress, Filming, video_line
-from ppo_torchrl.positions import GymEnvs
+from ppo_torchrl.env_state import env_state_of
 from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.robots.env import LocomotionEnv
 from ppo_torchrl.robots.gait import FOOT_PAIRS
@@ -80,7 +80,7 @@ def run_episodes(cfg, ac: ActorCritic, obs_stats: Optional[dict], seeds: Sequenc
     mode = ExplorationType.DETERMINISTIC if deterministic else ExplorationType.RANDOM
     returns, lengths, distances, gaits, crossed, heights = [], [], [], [], [], []
     terminated, ends = [], []  # per episode: ended by the env (not its time limit), and why (locomotion envs)
-    gym_env = next(t for t in env.transform if isinstance(t, GymEnvs)).gym_envs[0]
+    gym_env = env_state_of(env).gym_envs[0]
     film = (Filming(video_path, gym_env, [e for e in video_episodes if 0 <= e < episodes], video_length)
             if video_path is not None else None)
     video = None

@@ -4,8 +4,8 @@
 each has two faces over the same object:
 - the numpy face, `__call__`, which the fast collector calls once per env step;
 - the TorchRL face, `ObservationNormalization` / `RewardNormalization` (`Transform`s), which the card's
-  pipeline `TransformedEnv(GymWrapper(...))` runs, whose `get_extra_state` is how any TorchRL collector
-  (one process, `MultiSyncCollector`, `RayCollector`) hands the statistics over in its `state_dict()`.
+  pipeline `TransformedEnv(GymWrapper(...))` runs. The env's `EnvState` (env_state.py) owns both
+  normalizers: their state travels in its snapshot, in any TorchRL collector's `state_dict()`.
 Observations: `standardize` is the formula, once, for numpy arrays and torch tensors alike; the
 statistics are the exact running mean and variance of every observation the envs emit (reset ones
 included), or ("fixed") moments fitted on random-action rollouts by `fit_fixed`, then frozen.
@@ -18,7 +18,7 @@ clipping. TorchRL has no return-based scaling, hence the transform here.
 from __future__ import annotations
 
 import math
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 import torch
@@ -135,6 +135,7 @@ class ObservationNormalizer:
         self.clip = clip
         self.epsilon = epsilon
         self.enabled = enabled
+        self.before_reset: Optional[dict] = None  # the statistics before a full reset no step has followed yet
 
     @property
     def frozen(self) -> bool:
@@ -144,6 +145,7 @@ class ObservationNormalizer:
         self.stats.frozen = frozen
 
     def __call__(self, obs: np.ndarray, update: bool = True) -> np.ndarray:
+        self.before_reset = None  # the fast collector acts on what it normalizes
         if not self.enabled:
             return obs.astype(np.float32)
         if update:
@@ -207,16 +209,14 @@ def make_observation_normalizer(transforms_cfg, obs_dim: int, stats: Optional[di
     return norm
 
 
-def as_arrays(state: dict) -> dict:
-    """Numbers as float64 arrays: TorchRL's worker processes carry state dicts as TensorDicts, where a Python
-    float would become a float32 tensor (a count of 1e6 + 1e-4 loses its prior)."""
-    return {k: np.asarray(v, np.float64) if isinstance(v, float) else v for k, v in state.items()}
-
-
 class ObservationNormalization(ObservationTransform):
     """The TorchRL face of an `ObservationNormalizer`: normalizes "observation" on reset and step (in float64,
     then to float32, as the networks take it), and updates the statistics with each observation the envs emit
-    (with a partial reset of batched envs, only the new ones)."""
+    (with a partial reset of batched envs, only the new ones).
+    An observation no policy acted on is not counted: a reset of every env that follows another with no step
+    between (TorchRL's multi-process collectors reset each worker's envs after seeding them, the Collector
+    having reset them once when built) puts back the statistics from before the first, so every path and
+    scale counts each env's first observation once, as the fast collector does."""
 
     def __init__(self, normalizer: ObservationNormalizer):
         super().__init__(in_keys=["observation"], out_keys=["observation"])
@@ -245,6 +245,7 @@ class ObservationNormalization(ObservationTransform):
         return torch.as_tensor(self.normalizer.apply(x), dtype=torch.float32, device=obs.device)
 
     def _call(self, next_tensordict: TensorDictBase) -> TensorDictBase:
+        self.normalizer.before_reset = None
         return next_tensordict.set("observation", self._normalize(next_tensordict.get("observation")))
 
     def _reset(self, tensordict: TensorDictBase, tensordict_reset: TensorDictBase) -> TensorDictBase:
@@ -252,14 +253,12 @@ class ObservationNormalization(ObservationTransform):
         obs = tensordict_reset.get("observation")
         if mask is not None:
             mask = mask.reshape(obs.shape[:-1])
+        norm = self.normalizer
+        if mask is None or bool(mask.all()):
+            if norm.before_reset is not None and not norm.frozen:  # the last reset's observations: never acted on
+                norm.stats.load_state_dict(norm.before_reset)
+            norm.before_reset = norm.stats.state_dict()
         return tensordict_reset.set("observation", self._normalize(obs, mask))
-
-    def get_extra_state(self) -> dict:
-        return as_arrays(self.normalizer.state_dict() or {})
-
-    def set_extra_state(self, state) -> None:
-        if state:
-            self.normalizer.load_state_dict(state)
 
 
 class ReturnNormalizer:
@@ -335,27 +334,12 @@ class RewardNormalization(Transform):
         super().__init__(in_keys=["reward"], out_keys=["reward"])
         self.normalizer = normalizer
 
-    def get_extra_state(self) -> dict:
-        """In the module's state_dict (and so in any TorchRL collector's): the return statistics and each
-        env's discounted return so far."""
-        return as_arrays(self.normalizer.state_dict())
-
-    def set_extra_state(self, state) -> None:
-        self.normalizer.load_state_dict(state)
-
     def _step(self, tensordict: TensorDictBase, next_tensordict: TensorDictBase) -> TensorDictBase:
         reward = next_tensordict.get("reward")
         done = next_tensordict.get("done").reshape(-1).cpu().numpy()
         scaled = self.normalizer(reward.reshape(-1).double().cpu().numpy(), done)
         next_tensordict.set("reward", torch.as_tensor(scaled, dtype=reward.dtype).reshape(reward.shape))
         return next_tensordict
-
-
-def stats_of(transforms: Sequence[Transform]) -> Tuple[Optional[ObservationNormalizer], Optional[RewardNormalizer]]:
-    """The normalizers a TorchRL env's transforms hold (None where there is none)."""
-    obs = next((t.normalizer for t in transforms if isinstance(t, ObservationNormalization)), None)
-    rew = next((t.normalizer for t in transforms if isinstance(t, RewardNormalization)), None)
-    return obs, rew
 
 
 def pooled(base: Optional[dict], parts: List[Optional[dict]]) -> Optional[dict]:

@@ -1,18 +1,11 @@
-"""Where each env is: the one owner of the Gymnasium envs under TorchRL's wrapper.
+"""Where one Gymnasium env is: its position, saved and restored (the env's EnvState, env_state.py, holds
+the positions of all its envs).
 
-`GymEnvs` is a TorchRL transform that changes nothing in the data; it holds the Gymnasium envs of a
-`TransformedEnv(GymWrapper(...))` (built by `envs.make_torchrl_env`), so that every path reaches them
-through the public transform chain:
-- the fast collector steps them directly;
-- `positions()` / `continue_from()` save and restore each env (simulator state, time-limit counter,
-  RNG, the episode so far, the observation the policy acts on next): a resumed run continues its
-  episodes as the uninterrupted run would;
-- `env_metrics()`: the scalars a step env keeps (curriculum level, recent success rate);
-- `evaluate` films and measures the env through `gym_envs[0]`;
-- the episode so far: each env's return and length are Gymnasium's `RecordEpisodeStatistics` (the
-  library's counter, which a resumed episode carries on), written to every step and reset as TorchRL's
-  `episode_reward` / `step_count` (RewardSum's and StepCounter's keys). The fast collector reads the same
-  counters, so every path logs the same episodes.
+- `get_env_state` / `set_env_state`: the simulator state, time-limit counter, RNG and the episode so far
+  (Gymnasium's `RecordEpisodeStatistics`, the library's counter, which a resumed episode carries on): a
+  resumed run continues its episodes as the uninterrupted run would;
+- `ResumableReset`: a training env whose next reset can continue a saved episode, and which keeps the
+  observation the policy acts on next.
 
 Reaching into Gymnasium: a bit-exact continuation needs the `TimeLimit` counter (`_elapsed_steps`),
 which Gymnasium keeps private; `get_env_state` / `set_env_state` are the one place that reads it.
@@ -20,14 +13,10 @@ which Gymnasium keeps private; `get_env_state` / `set_env_state` are the one pla
 
 from __future__ import annotations
 
-from typing import Dict, List, Optional
+from typing import Optional
 
 import gymnasium as gym
 import numpy as np
-import torch
-from tensordict import TensorDictBase
-from torchrl.data import Composite, Unbounded
-from torchrl.envs.transforms import Transform
 
 from ppo_torchrl.errors import ConfigError
 
@@ -119,62 +108,3 @@ def resumable(env: gym.Env) -> ResumableReset:
     """A training env: Gymnasium's episode counter, and a reset that can continue a saved episode."""
     return ResumableReset(gym.wrappers.RecordEpisodeStatistics(env))
 
-
-EPISODE_KEYS = ("episode_reward", "step_count")
-
-
-class GymEnvs(Transform):
-    """Holds the Gymnasium envs under the wrapper (in env order) and writes each env's episode so far
-    (`episode_reward`, `step_count`: raw return and length) from their counters."""
-
-    def __init__(self, envs: List[ResumableReset]):
-        super().__init__(in_keys=[], out_keys=list(EPISODE_KEYS))
-        self.gym_envs = envs
-
-    def episodes(self) -> tuple:
-        """The return and length of each env's episode so far: ([n], [n]) arrays."""
-        records = [env.record for env in self.gym_envs]
-        return (np.array([r.episode_returns for r in records], np.float64),
-                np.array([r.episode_lengths for r in records], np.int64))
-
-    def _write_episodes(self, data: TensorDictBase) -> TensorDictBase:
-        shape = self.parent.batch_size + (1,)
-        returns, lengths = self.episodes()
-        data.set("episode_reward", torch.from_numpy(returns).reshape(shape))
-        data.set("step_count", torch.from_numpy(lengths).reshape(shape))
-        return data
-
-    def _call(self, next_tensordict: TensorDictBase) -> TensorDictBase:
-        return self._write_episodes(next_tensordict)
-
-    def _reset(self, tensordict: TensorDictBase, tensordict_reset: TensorDictBase) -> TensorDictBase:
-        return self._write_episodes(tensordict_reset)
-
-    def transform_observation_spec(self, observation_spec: Composite) -> Composite:
-        shape = self.parent.batch_size + (1,)
-        observation_spec["episode_reward"] = Unbounded(shape=shape, dtype=torch.float64)  # as Gymnasium sums it
-        observation_spec["step_count"] = Unbounded(shape=shape, dtype=torch.int64)
-        return observation_spec
-
-    def positions(self) -> list:
-        return [env.position() for env in self.gym_envs]
-
-    def continue_from(self, positions: list, now: bool) -> bool:
-        """Each env continues its saved episode: `now` (the fast collector), or at its next reset (TorchRL's
-        Collector resets its envs when it starts). False, changing nothing, when the count differs."""
-        if positions is None or len(positions) != len(self.gym_envs):
-            return False
-        for env, position in zip(self.gym_envs, positions):
-            if now:
-                env.restore(position)
-            else:
-                env.pending = position
-        return True
-
-    def env_metrics(self) -> Dict[str, float]:
-        """Scalars the envs keep, logged each iteration: a step env's curriculum level and recent success
-        rate (`LocomotionEnv.terrain_metrics`); {} where the envs say nothing."""
-        reports = [env.unwrapped.terrain_metrics() for env in self.gym_envs
-                   if hasattr(env.unwrapped, "terrain_metrics")]
-        reports = [r for r in reports if r]
-        return {key: float(np.mean([r[key] for r in reports])) for key in reports[0]} if reports else {}

@@ -25,7 +25,7 @@ def test_round_trip_restores_weights_optimizer_and_normalization(tiny_cfg, tmp_p
     for p, q in zip(fresh.params, trainer.params):
         torch.testing.assert_close(p, q)
     np.testing.assert_allclose(fresh.collector.obs_stats()["var"], obs_stats["var"])
-    assert fresh.collector.reward_norm.returns.stats.count == state["normalization"]["return"]["count"]
+    assert fresh.collector.state.reward_norm.returns.stats.count == state["normalization"]["return"]["count"]
     assert fresh.optimizer.state_dict()["state"][0]["step"] == trainer.optimizer.state_dict()["state"][0]["step"]
 
 

@@ -55,7 +55,8 @@ def test_both_backends_normalizers_give_numpys_mean_and_var_of_the_same_stream()
     from torchrl.envs import RenameTransform
 
     from ppo_torchrl.envs import make_torchrl_env
-    from ppo_torchrl.normalization import ObservationNormalizer, obs_scale, stats_of
+    from ppo_torchrl.env_state import env_state_of
+    from ppo_torchrl.normalization import ObservationNormalizer, obs_scale
 
     from conftest import compose_config
 
@@ -75,7 +76,7 @@ def test_both_backends_normalizers_give_numpys_mean_and_var_of_the_same_stream()
     stream = torch.stack(stream).double().numpy()
     assert done.sum() >= 20 and stream.shape[0] == 1 + 2000 + int(done[:-1].sum())
 
-    vecnorm = stats_of(list(env.transform))[0].state_dict()
+    vecnorm = env_state_of(env).obs_norm.state_dict()
     assert vecnorm["count"] == len(stream)
     fast = ObservationNormalizer((stream.shape[1],), clip=None)
     for row in stream:

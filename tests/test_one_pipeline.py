@@ -34,20 +34,25 @@ def test_torchrls_multisync_collector_runs_the_fast_collector_as_its_collector_c
     assert np.isfinite(actions).all() and actions.std() > 0 and lows.shape == highs.shape
 
 
-def test_two_workers_resume_every_episode_bit_exactly(tiny_cfg):
-    """Each worker's envs, statistics, running returns and exploration RNG come back from the checkpoint:
-    the batch after a resume is the batch the uninterrupted run collects."""
-    cfg = tiny_cfg("collector.workers=2", "collector.num_envs=2", "env.max_episode_steps=40")
+@pytest.mark.parametrize("scale", [["collector.workers=2", "collector.num_envs=2"], ["collector.num_envs=4"],
+                                   ["collector.backend=torchrl", "collector.num_envs=4"]])
+def test_a_resume_collects_the_batch_the_uninterrupted_run_collects(tiny_cfg, scale):
+    """One resume path (Collection.load_state_dict -> the collector's load_state_dict -> each EnvState's
+    snapshot): each env's position, the statistics, running returns and exploration RNG come back from the
+    checkpoint, the batch after a resume is the batch the uninterrupted run collects (the fast collector in
+    workers or in one process; TorchRL's Collector in one process, the torch RNG set as the trainer does)."""
+    cfg = tiny_cfg(*scale, "env.max_episode_steps=40")
     ac = make_actor_critic(cfg.policy, env_spec(cfg.env))
     first = make_collector(cfg, ac, 3, torch.device("cpu"))
     second = None
     try:
         for _ in range(2):
             first.collect()
-        state = first.state_dict()
+        state, rng = first.state_dict(), torch.get_rng_state()
         uninterrupted = first.collect()
         second = make_collector(cfg, ac, 77, torch.device("cpu"))  # another seed: everything must come from state
         second.load_state_dict(state)
+        torch.set_rng_state(rng)  # the checkpoint's (TorchRL's Collector draws with torch in this process)
         resumed = second.collect()
         for key in uninterrupted.keys(True, True):
             assert torch.equal(uninterrupted[key], resumed[key]), key
@@ -113,7 +118,7 @@ def test_episode_counts_have_one_owner_gymnasiums_counter_which_a_resumed_episod
     """TorchRL's path writes `episode_reward` / `step_count` from Gymnasium's RecordEpisodeStatistics (as
     the fast rollout reads them): the raw return so far, and after a restored position the saved episode
     goes on counting from where it was, not from 0."""
-    from ppo_torchrl.positions import GymEnvs
+    from ppo_torchrl.env_state import env_state_of
 
     cfg = tiny_cfg()
     stats = {"mean": np.zeros(4), "var": np.ones(4), "count": 2.0}
@@ -122,8 +127,8 @@ def test_episode_counts_have_one_owner_gymnasiums_counter_which_a_resumed_episod
     env = make()
     rollout = env.rollout(12, break_when_any_done=False)
     reward, done = rollout["next", "reward"].squeeze(-1), rollout["next", "done"].squeeze(-1)
-    gym = next(t for t in env.transform if isinstance(t, GymEnvs))
-    returns, lengths = gym.episodes()
+    state = env_state_of(env)
+    returns, lengths = state.episodes()
     for i in range(2):  # the episode so far since each env's last done
         start = int(done[i, :-1].nonzero().max()) + 1 if done[i, :-1].any() else 0
         assert rollout["next", "step_count"][i, -1].item() == lengths[i] == 12 - start
@@ -131,8 +136,40 @@ def test_episode_counts_have_one_owner_gymnasiums_counter_which_a_resumed_episod
     assert "RewardSum" not in str(env.transform) and "StepCounter" not in str(env.transform)
 
     again = make()
-    again_gym = next(t for t in again.transform if isinstance(t, GymEnvs))
-    assert again_gym.continue_from(gym.positions(), now=False)
+    again_state = env_state_of(again)
+    again_state.restore({"positions": state.positions()})
+    assert again_state.continue_episodes(now=False)
     first = again.reset()
     assert first["step_count"].squeeze(-1).tolist() == lengths.tolist()
     np.testing.assert_allclose(first["episode_reward"].squeeze(-1).numpy(), returns)
+
+
+@pytest.mark.parametrize("scale", [[], ["collector.workers=2"]])
+@pytest.mark.parametrize("backend", ["fast", "torchrl"])
+def test_every_path_and_scale_counts_the_same(tiny_cfg, backend, scale):
+    """The same accounting on every path (FastCollector, TorchRL's Collector) and scale (one process, two
+    workers), 4 envs each: the observation statistics count each env's first observation once, every step's
+    next observation and every reset after a done; the return statistics each frame once after their prior;
+    each finished episode is logged once with Gymnasium's return and length; every env's position is in
+    its EnvState's snapshot."""
+    from ppo_torchrl.collectors.internals import env_snapshot, worker_parts
+
+    envs = "collector.num_envs=2" if scale else "collector.num_envs=4"
+    cfg = tiny_cfg(f"collector.backend={backend}", envs, *scale, "env.max_episode_steps=30")
+    ac = make_actor_critic(cfg.policy, env_spec(cfg.env))
+    collection = make_collector(cfg, ac, 5, torch.device("cpu"))
+    try:
+        batches = [collection.collect() for _ in range(3)]
+        frames = sum(b.numel() for b in batches)
+        dones = sum(int(b.get(("next", "done")).sum()) for b in batches)
+        episodes = collection.pop_episodes()
+        state = collection.state_dict()
+        parts = worker_parts(state["collector"])
+        positions = sum(len(env_snapshot(part, collection._key)["positions"]) for part in parts)
+    finally:
+        collection.close()
+    assert frames == 3 * cfg.collector.frames_per_batch and dones > 4
+    assert state["obs"]["count"] == 4 + frames + dones
+    assert state["return"]["count"] == pytest.approx(frames + 1e-4)
+    assert len(episodes) == dones and all(0 < length <= 30 for _, length in episodes)
+    assert positions == 4

@@ -125,9 +125,9 @@ def test_eval_env_keeps_the_models_frame_skip_and_time_limit(tiny_cfg):
     cfg = tiny_cfg("env=quadruped", "env.max_episode_steps=30", "env.locomotion.healthy_z_range=[0.0,5.0]")
     env = make_torchrl_env(cfg.env, clip_actions=True, gamma=0.99, obs_stats={"mean": np.zeros(35), "var": np.ones(35)},
                            train=False)
-    from ppo_torchrl.positions import GymEnvs
+    from ppo_torchrl.env_state import env_state_of
 
-    assert next(t for t in env.transform if isinstance(t, GymEnvs)).gym_envs[0].unwrapped.frame_skip == 4
+    assert env_state_of(env).gym_envs[0].unwrapped.frame_skip == 4
     rollout = env.rollout(1000, break_when_any_done=True)
     assert rollout.shape[-1] == 30
 

@@ -71,10 +71,9 @@ def test_workers_collect_exact_on_policy_batches_and_share_one_set_of_stats(tiny
         dones = sum(int(b.get(("next", "done")).sum()) for b in batches)
         obs = collector.obs_stats()
         # every observation counted once: each env's first reset, every step and every reset after a done
-        # (TorchRL's Collector in a MultiSyncCollector worker resets each env twice before its first step:
-        # one more each; in a Ray actor, once)
-        first = 8 if backend == "torchrl" and "ray" not in distributed else 4
-        assert obs["count"] == first + 512 + dones and np.isfinite(obs["mean"]).all() and (obs["var"] > 0).all()
+        # (TorchRL's Collector in a MultiSyncCollector worker resets each env twice before its first step: the
+        # first reset, which no policy acts on, is not counted)
+        assert obs["count"] == 4 + 512 + dones and np.isfinite(obs["mean"]).all() and (obs["var"] > 0).all()
         returns = collector.state_dict()["return"]
         assert returns["count"] == pytest.approx(512 + 1e-4)  # the prior, then each frame's return once
 
@@ -83,16 +82,19 @@ def test_workers_collect_exact_on_policy_batches_and_share_one_set_of_stats(tiny
                 p.fill_(-30.0 if name.endswith("log_std") else 0.0)  # mean 0, std e^-30: every action ~0
         batch = collector.collect()
         assert batch["action"].abs().max() < 1e-6  # every worker drew with the learner's new weights
-        mine = collector.env.transform.state_dict()  # the merged set, in the main process
+        from ppo_torchrl.collectors.internals import env_snapshot
+
+        mine = collector.state.snapshot(positions=False)  # the merged set, in the main process's EnvState
         _, workers = collector._worker_states()
-        # FastCollector's state_dict() adds where each env is; TorchRL's Collector's has no such entry
-        assert all(("positions" in w) == (backend == "fast") for w in workers)
+        # every worker's EnvState holds where each env is; FastCollector adds its own ("fast": the next obs, RNG)
+        assert all(("fast" in w) == (backend == "fast") for w in workers)
         assert len(workers) == 2
         for worker in workers:
-            for key in collector._stat_keys().values():  # the observation and return statistics
-                theirs, ours = worker["env_state_dict"][key], mine[key]
-                for name in set(ours) - {"returns"}:
-                    torch.testing.assert_close(torch.as_tensor(theirs[name]), torch.as_tensor(ours[name]))
+            theirs = env_snapshot(worker, collector._key)
+            assert len(theirs["positions"]) == 2  # collector.num_envs in this worker
+            for kind in ("obs", "reward"):  # the observation and return statistics
+                for name in set(mine[kind]) - {"returns"}:
+                    torch.testing.assert_close(torch.as_tensor(theirs[kind][name]), torch.as_tensor(mine[kind][name]))
     finally:
         collector.close()
 

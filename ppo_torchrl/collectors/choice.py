@@ -1,4 +1,7 @@
-"""Which TorchRL collector class a config runs, and why (the start line says it)."""
+"""Which TorchRL collector class a config runs, and why (the start line says it).
+
+A new collector class is registered here (`BACKENDS`); collection.py runs whatever is registered (its
+docstring states the contract)."""
 
 from __future__ import annotations
 
@@ -6,7 +9,11 @@ from typing import Tuple
 
 from ppo_torchrl.errors import ConfigError
 
-CHOICES = ("auto", "fast", "torchrl")  # collector.backend
+# collector.backend -> (module, class, the policy it steps: "actor" (it reads the actor's net, distribution and
+# bounds) or "sampling" (models.sampling_policy: the lean draw), the name the start line gives it)
+BACKENDS = {"fast": ("ppo_torchrl.collectors.fast", "FastCollector", "actor", "FastCollector"),
+            "torchrl": ("torchrl.collectors", "Collector", "sampling", "torchrl.Collector")}
+CHOICES = ("auto", *BACKENDS)  # collector.backend
 
 
 def resolve_backend(cfg) -> str:
@@ -24,7 +31,7 @@ def describe_backend(cfg) -> Tuple[str, str]:
     """(which collector runs, why): the start line says it."""
     c = cfg.collector
     path = resolve_backend(cfg)
-    name = "FastCollector" if path == "fast" else "torchrl.Collector"
+    name = BACKENDS[path][3]
     if path == "fast":
         why = "no env.transforms.extra" if c.backend == "auto" else "collector.backend=fast"
     else:
@@ -34,3 +41,11 @@ def describe_backend(cfg) -> Tuple[str, str]:
     elif c.workers > 1:
         name = f"MultiSyncCollector({name} x {c.workers})"
     return name, why
+
+
+def collector_class(backend: str) -> Tuple[type, str]:
+    """The collector class of a (resolved) backend and the policy it steps ("actor" or "sampling")."""
+    import importlib
+
+    module, name, policy, _ = BACKENDS[backend]
+    return getattr(importlib.import_module(module), name), policy

@@ -1,17 +1,24 @@
 """The app's view of collection, over any TorchRL collector: one process, `MultiSyncCollector` or
-`RayCollector`, each stepping `FastCollector` or TorchRL's `Collector`.
+`RayCollector`, each stepping `FastCollector` or TorchRL's `Collector`. It collects and pools; the env-side
+state (statistics, episode counters, env metrics, positions) is the env's `EnvState` (env_state.py).
 
 - batches: TorchRL's, reshaped to [envs, steps];
-- finished episodes: read from the batch (`episode_reward`, `step_count`: Gymnasium's episode counters,
-  positions.GymEnvs), wherever the envs live;
-- statistics: the env's normalization transforms (normalization.py) own them. With several workers
-  each worker's set grows during a batch; after it, what every worker added since the last merge is
-  pooled exactly (`normalization.pool`) into `self.env` (the main process's copy, never stepped) and
-  loaded back into every worker, read and written through the collectors' public
-  `state_dict()` / `load_state_dict()` (each transform's own extra state; each env keeps its running
-  discounted return);
-- state for resume: the statistics, and the collector's own state: where each env is, in every worker
-  (FastCollector), or in the one process (TorchRL's Collector restarts on the saved positions).
+- finished episodes: read from the batch (`episode_reward`, `step_count`: Gymnasium's episode counters, as
+  EnvState writes them), wherever the envs live;
+- with several workers each worker's EnvState grows during a batch; after it, the workers' snapshots are
+  merged (`EnvState.merge`: exact pooled statistics, the env metrics averaged once) into `self.state` (the
+  main process's EnvState, never stepped) and loaded back into every worker (`EnvState.shared`), through
+  the collectors' public `state_dict()` / `load_state_dict()` (their layout: collectors/internals.py);
+- state for resume: the collector's, which holds each EnvState's snapshot (positions included); one path
+  loads it for every collector and scale (TorchRL's Collector then restarts on the saved positions).
+
+A new collector class touches two files: its own, and its line in `collectors/choice.py` (`BACKENDS`). The
+contract: a `torchrl.collectors.Collector` that TorchRL's multi-process and Ray collectors can build
+(`collector_class=`, their arguments); it steps the env of `envs.make_torchrl_env` through its EnvState
+(the statistics through `EnvState.obs_norm` / `reward_norm` when it bypasses the transforms, the episodes
+through Gymnasium's counters); its `state_dict()` holds the env's transforms' state (`env_state_dict`, as
+TorchRL's Collector's does), its own entries beside it, and its `load_state_dict()` takes one back, calling
+`EnvState.continue_episodes()` if it puts its envs back itself.
 """
 
 from __future__ import annotations
@@ -20,24 +27,24 @@ import functools
 import signal
 from typing import Dict, List, Optional, Tuple
 
-import numpy as np
 import torch
 from omegaconf import OmegaConf
 from tensordict import TensorDict
-from torchrl.collectors import Collector
 
+from ppo_torchrl.collectors.choice import collector_class as collector_class_of
 from ppo_torchrl.collectors.choice import resolve_backend
-from ppo_torchrl.collectors.fast import FastCollector, open_state, packed_state
+from ppo_torchrl.collectors.internals import env_snapshot, env_state_key, shared_part, with_worker_parts, worker_parts
 from ppo_torchrl.collectors.multiprocess import (
     WorkerWatch,
     make_multi_collector,
+    shutdown_ray,
     warn_if_oversubscribed,
     worker_env,
 )
+from ppo_torchrl.env_state import EnvState, env_state_of
+from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.envs import make_torchrl_env
 from ppo_torchrl.models import sampling_policy
-from ppo_torchrl.normalization import ObservationNormalization, RewardNormalization, pooled, stats_of
-from ppo_torchrl.positions import GymEnvs
 
 BATCH_KEYS = ["observation", "action", ("next", "observation"), ("next", "reward"), ("next", "done"),
               ("next", "terminated"), ("next", "truncated")]
@@ -48,18 +55,16 @@ class Collection:
         c = cfg.collector
         self.fast = resolve_backend(cfg) == "fast"
         self.multi = c.workers > 1 or bool(c.distributed)
-        collector_class = FastCollector if self.fast else Collector
-        # FastCollector reads the actor's net, distribution and bounds; TorchRL's Collector steps the lean draw
-        policy = ac.actor if self.fast else sampling_policy(ac)
+        collector_class, steps = collector_class_of(resolve_backend(cfg))  # collectors/choice.py: the registered
+        policy = ac.actor if steps == "actor" else sampling_policy(ac)  # FastCollector reads the actor's net
         env_kwargs = dict(clip_actions=ac.head == "normal", gamma=cfg.advantage.gamma)
         common = dict(frames_per_batch=c.frames_per_batch, total_frames=-1, policy_device=device,
                       env_device="cpu", storing_device=device)
         # In one process, the env the collector steps; with workers, the main process's copy of the
         # transforms that holds the merged statistics (never stepped).
         self.env = make_torchrl_env(cfg.env, num_envs=c.num_envs, seed=seed, **env_kwargs)
-        transforms = list(self.env.transform)
-        self.obs_norm, self.reward_norm = stats_of(transforms)
-        self.gym = next(t for t in transforms if isinstance(t, GymEnvs))
+        self.state = env_state_of(self.env)
+        self._key = env_state_key(self.env)
         self._watch: Optional[WorkerWatch] = None  # with worker processes: a death ends the run at once
         if not self.multi:
             self._new_collector = functools.partial(collector_class, policy=policy,
@@ -70,7 +75,7 @@ class Collection:
         else:
             warn_if_oversubscribed(c)
             env_cfg = OmegaConf.to_container(cfg.env, resolve=True)
-            fixed = self.obs_norm.state_dict() if cfg.env.transforms.obs_norm == "fixed" else None  # fitted once
+            fixed = self.state.obs_norm.state_dict() if cfg.env.transforms.obs_norm == "fixed" else None  # fitted once
             make_env = [functools.partial(worker_env, env_cfg, num_envs=c.num_envs, obs_stats=fixed,
                                           seed=seed + 7919 * (i + 1), **env_kwargs) for i in range(c.workers)]
             # Workers start with SIGINT blocked (inherited): a Ctrl-C while they import is the main process's
@@ -82,8 +87,7 @@ class Collection:
                 signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
             self._watch = WorkerWatch.of(self.collector)
             self.collector.set_seed(seed)
-        self._keys = self._stat_keys()
-        self._base: Dict[str, Optional[dict]] = {}  # the merged stats the workers started the batch from
+        self._base: Optional[dict] = None  # the merged snapshot the workers started the batch from
         self._metrics: Dict[str, float] = {}
         self._iterator = iter(self.collector)
         self._finished: List[Tuple[float, int]] = []
@@ -93,9 +97,11 @@ class Collection:
         try:
             if self.multi:
                 self.collector.update_policy_weights_()  # every worker collects with the weights of the last update
-            batch = next(self._iterator)
-            if self.multi:
-                self._merge_stats()
+                batch = next(self._iterator)
+                self._metrics = self._merge_stats()
+            else:
+                batch = next(self._iterator)
+                self._metrics = self.state.env_metrics()
         except Exception:
             self._raise_if_a_worker_died()
             raise
@@ -119,25 +125,14 @@ class Collection:
 
     def env_metrics(self) -> Dict[str, float]:
         """A step env's curriculum level and recent success rate; {} where the envs say nothing."""
-        return self._metrics if self.multi else self.gym.env_metrics()
+        return self._metrics
 
     def obs_stats(self) -> Optional[dict]:
         """Observation statistics {"mean", "var", "count"} (None without normalization)."""
-        state = self.obs_norm.state_dict()
+        state = self.state.obs_norm.state_dict()
         return None if state is None else {k: state[k] for k in ("mean", "var", "count")}
 
-    # ---------------------------------------------------------------- statistics across workers
-    def _stat_keys(self) -> Dict[str, str]:
-        """The transforms' state-dict keys of the statistics ("obs", "reward"): the same in every worker."""
-        names = list(self.env.transform.state_dict())  # each normalization module holds one entry: its state
-        keys = {}
-        for name, module in self.env.transform.named_modules():
-            kind = "obs" if isinstance(module, ObservationNormalization) else \
-                "reward" if isinstance(module, RewardNormalization) else None
-            if kind is not None:
-                keys[kind] = next(key for key in names if key.startswith(f"{name}."))
-        return keys
-
+    # ---------------------------------------------------------------- the workers' EnvStates, pooled
     def _collector_state(self):
         """The collector's `state_dict()`; with workers, a dead one is one line naming it (WorkerWatch)."""
         try:
@@ -152,111 +147,75 @@ class Collection:
             raise error from None
 
     def _worker_states(self) -> Tuple[object, list]:
-        """The collector's state (MultiSyncCollector: {"worker0": ..., "frames": ...}; Ray: a list),
-        and each worker's part of it, opened (fast.open_state)."""
+        """The collector's state and each worker's part of it, opened (internals.worker_parts)."""
         whole = self._collector_state()
-        return whole, [open_state(part) for part in self._parts(whole)]
+        return whole, worker_parts(whole)
 
-    def _parts(self, whole) -> list:
-        """Each worker's part of a collector state (MultiSyncCollector: {"worker0": ..., "frames": ...};
-        Ray: a list); in one process, the state itself."""
-        if not self.multi:
-            return [whole]
-        return [whole[f"worker{i}"] for i in range(self.collector.num_workers)] if isinstance(whole, dict) \
-            else list(whole)
-
-    def _merge_stats(self) -> None:
+    def _merge_stats(self) -> Dict[str, float]:
+        """Pool the workers' EnvStates into `self.state` and load the result back into every worker; returns
+        the env metrics, averaged over the workers."""
         whole, workers = self._worker_states()
-        metrics = [w["env_metrics"] for w in workers if w.get("env_metrics")]
-        self._metrics = {k: float(np.mean([m[k] for m in metrics])) for k in metrics[0]} if metrics else {}
-        if "obs" in self._keys:
-            obs = pooled(self._base.get("obs"), [to_numpy(w["env_state_dict"][self._keys["obs"]]) for w in workers])
-            self.obs_norm.load_state_dict(obs)
-        if "reward" in self._keys:
-            parts = [to_numpy(w["env_state_dict"][self._keys["reward"]]) for w in workers]
-            base = self._base.get("reward") or self.reward_norm.state_dict()  # every worker starts from this prior
-            self.reward_norm.load_state_dict(pooled(base, parts), running=False)
+        # before the first merge the workers share only the return statistics' prior
+        base = self._base or {"obs": None, "reward": self.state.snapshot(positions=False)["reward"]}
+        merged = EnvState.merge(base, [env_snapshot(w, self._key) for w in workers])
+        self.state.restore(merged, returns=False)
         self._push(whole, workers)
+        return merged["metrics"]
 
     def _push(self, whole=None, workers: Optional[list] = None) -> None:
-        """Load the statistics of `self.env` into every worker (each keeps its envs' running returns)."""
+        """Load the statistics of `self.state` into every worker (each keeps its envs and their returns)."""
         if whole is None:
             whole, workers = self._worker_states()
-        obs, reward = self.obs_norm.state_dict(), self.reward_norm.state_dict()
-        for w in workers:
-            env_state = w["env_state_dict"]
-            if "obs" in self._keys:
-                env_state[self._keys["obs"]] = obs
-            if "reward" in self._keys:
-                own = to_numpy(env_state[self._keys["reward"]])
-                env_state[self._keys["reward"]] = {**reward, "returns": own["returns"]}
-            w.pop("positions", None)  # each env stays where it is
-            w.pop("env_metrics", None)
-        parts = [packed_state(w) if self.fast else w for w in workers]
-        self.collector.load_state_dict({**whole, **{f"worker{i}": p for i, p in enumerate(parts)}}
-                                       if isinstance(whole, dict) else parts)
-        self._base = {"obs": obs, "reward": reward}
+        merged = self.state.snapshot(positions=False)
+        parts = [shared_part(w, self._key, EnvState.shared(merged, env_snapshot(w, self._key))) for w in workers]
+        self.collector.load_state_dict(with_worker_parts(whole, parts))
+        self._base = merged
 
     # ---------------------------------------------------------------- checkpoints
     def state_dict(self) -> dict:
         """The statistics in the shared format (evaluation, export and init_from read "obs"), and the
-        collector's state for an exact resume (policy weights left out: the checkpoint has them)."""
-        reward = self.reward_norm.state_dict()
-        state = {"obs": self.obs_stats(), "obs_frozen": self.obs_norm.frozen,
+        collector's state for an exact resume."""
+        reward = self.state.reward_norm.state_dict()
+        state = {"obs": self.obs_stats(), "obs_frozen": self.state.obs_norm.frozen,
                  "return": {k: reward[k] for k in ("mean", "var", "count")}}
-        whole = self._collector_state()
-        if not self.fast:  # FastCollector's state leaves the weights out itself
-            for part in self._parts(whole):
-                part.pop("policy_state_dict", None)
-        state["collector"] = whole
-        if not self.fast and not self.multi:
-            state["positions"] = self.gym.positions()
+        # TorchRL's Collector keeps its policy's weights in it (its load_state_dict needs them); FastCollector not
+        state["collector"] = self._collector_state()
         return state
 
     def load_state_dict(self, state: dict) -> None:
-        """init_from: the statistics only; resume (a "collector" entry): all of it."""
-        obs = state.get("obs")
-        if obs is not None and self.obs_norm.enabled:
-            self.obs_norm.load_state_dict({**obs, "frozen": bool(state.get("obs_frozen", self.obs_norm.frozen))})
+        """init_from: the statistics only; resume (a "collector" entry): all of it, on every path and scale."""
+        obs, norm = state.get("obs"), self.state.obs_norm
+        if obs is not None and norm.enabled:
+            norm.load_state_dict({**obs, "frozen": bool(state.get("obs_frozen", norm.frozen))})
         if state.get("return") is not None:
-            self.reward_norm.load_state_dict(state["return"], running=False)
-        saved = state.get("collector")
-        if saved is not None and (self.fast or self.multi):
-            self.collector.load_state_dict(saved)  # the transforms' stats and each env's position, in every worker
-            if self.multi:
-                self._push()
-        elif saved is not None:
-            self.env.transform.load_state_dict(saved["env_state_dict"], strict=False)
-            self._continue_episodes(state)
-        elif self.multi:
+            self.state.reward_norm.load_state_dict(state["return"], running=False)
+        if state.get("collector") is not None:
+            if any(env_snapshot(part, self._key) is None for part in worker_parts(state["collector"])):
+                raise ConfigError("this checkpoint was written by an earlier version of ppo_torchrl, before the env's "
+                                  "state had one owner; resume it with that version, or start a new run from its "
+                                  "weights and statistics with init_from=<its run dir>")
+            self.collector.load_state_dict(state["collector"])  # each EnvState's snapshot, in every worker
+            self._continue_episodes()
+        if self.multi:
             self._push()
 
-    def _continue_episodes(self, state: dict) -> None:
-        """TorchRL's Collector: a new one, whose first reset restores each env's saved position; the saved
-        observation is not counted again by the statistics (frozen for that reset)."""
-        if not self.gym.continue_from(state.get("positions"), now=False):
+    def _continue_episodes(self) -> None:
+        """Positions loaded that the collector did not take (TorchRL's Collector in this process; FastCollector
+        puts its envs back itself, and workers' envs are theirs): a new Collector, whose first reset restores
+        each env's saved position; the saved observation is not counted again (statistics frozen for it)."""
+        if not self.state.continue_episodes(now=False):
             return
-        was_frozen = self.obs_norm.frozen
-        self.obs_norm.freeze()
+        norm = self.state.obs_norm
+        was_frozen = norm.frozen
+        norm.freeze()
         self.collector.shutdown(close_env=False)
         self.collector = self._new_collector(self.env)
-        self.obs_norm.freeze(was_frozen)
+        norm.freeze(was_frozen)
         self._iterator = iter(self.collector)
 
     def close(self) -> None:
         if self._watch is not None:
             self._watch.stop()
         self.collector.shutdown()
-        if self.multi:
-            from ppo_torchrl.collectors.multiprocess import shutdown_ray
+        shutdown_ray(self.collector)  # the local Ray instance this run started, if any
 
-            shutdown_ray(self.collector)
-
-
-def to_numpy(state) -> dict:
-    """A transform's extra state as it comes back from a worker (tensors) in numpy."""
-    if state is None:
-        return None
-    if hasattr(state, "to_dict"):
-        state = state.to_dict()
-    return {k: (v.numpy() if isinstance(v, torch.Tensor) else v) for k, v in dict(state).items()}

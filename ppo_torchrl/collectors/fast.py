@@ -4,43 +4,27 @@ It is TorchRL's Collector over the same `TransformedEnv(GymWrapper(...))` as eve
 arguments TorchRL's `MultiSyncCollector`, `MultiAsyncCollector` and `RayCollector` pass to a
 `collector_class` (so they run it in each worker), weights arriving through TorchRL's weight sync. Only
 `rollout()` differs: a numpy copy of the actor's net (`NumpyPolicy`) draws each action, and the env's
-Gymnasium envs (positions.GymEnvs) are stepped directly, the observation and reward going through the
-numpy face of the env's own normalization transforms; no per-step TensorDict or torch op, so the
-per-step cost is close to the simulator's own. The batch has TorchRL's layout and keys, [num_envs, steps],
-`episode_reward` / `step_count` included (Gymnasium's RecordEpisodeStatistics, as positions.GymEnvs writes
-them on TorchRL's path).
+Gymnasium envs (held by its `EnvState`, env_state.py) are stepped directly, the observation and reward going
+through the numpy face of the env's own normalizers; no per-step TensorDict or torch op, so the per-step
+cost is close to the simulator's own. The batch has TorchRL's layout and keys, [num_envs, steps],
+`episode_reward` / `step_count` included (Gymnasium's RecordEpisodeStatistics, as EnvState writes them on
+TorchRL's path). Its state is TorchRL's (EnvState's snapshot in `env_state_dict`) and its own: the
+observation each env's policy acts on next and the exploration RNG, so a resumed run continues bit-exactly.
 """
 
 from __future__ import annotations
 
-import pickle
 from typing import Optional
 
 import numpy as np
 import torch
 from tensordict import TensorDict
 from torchrl.collectors import Collector
-from torchrl.envs import EnvBase, TransformedEnv
+from torchrl.envs import EnvBase
 
+from ppo_torchrl.collectors.internals import OWN, keep_counters, pickle_part, worker_parts
+from ppo_torchrl.env_state import env_state_of
 from ppo_torchrl.models import NumpyPolicy
-from ppo_torchrl.normalization import stats_of
-from ppo_torchrl.positions import GymEnvs
-
-
-PACKED = "packed"
-
-
-def packed_state(state: dict) -> dict:
-    """A FastCollector state as TorchRL's worker processes pass it best: one pickled `bytes` entry. They
-    turn a state dict into a TensorDict and send each tensor through shared memory, ~2 ms apiece and
-    ~20 ms a round trip for a dozen; one `bytes` entry stays one plain message (~1 ms)."""
-    return {PACKED: pickle.dumps(state)}
-
-
-def open_state(part) -> dict:
-    """A worker's part of a collector state as a dict: FastCollector's unpacked, TorchRL's as it is."""
-    part = dict(part)
-    return pickle.loads(part[PACKED]) if PACKED in part else part
 
 
 class FastCollector(Collector):
@@ -50,17 +34,14 @@ class FastCollector(Collector):
         kwargs["use_buffers"] = True
         kwargs.setdefault("auto_register_policy_transforms", False)
         env = create_env_fn if isinstance(create_env_fn, EnvBase) else create_env_fn(**(kwargs.pop("create_env_kwargs", None) or {}))
-        transforms = list(env.transform) if isinstance(env, TransformedEnv) else []
-        self.gym = next((t for t in transforms if isinstance(t, GymEnvs)), None)
-        if self.gym is None:
-            raise TypeError("FastCollector steps the env of envs.make_torchrl_env (a GymEnvs transform)")
-        self.obs_norm, self.reward_norm = stats_of(transforms)
+        self.env_state = env_state_of(env)  # TypeError for an env not of envs.make_torchrl_env
+        self.obs_norm, self.reward_norm = self.env_state.obs_norm, self.env_state.reward_norm
         before = self.obs_norm.state_dict()
         super().__init__(env, policy, frames_per_batch=frames_per_batch, **kwargs)
         # TorchRL's Collector resets the env once (its carrier), which this rollout does not use: the
         # statistics count each env's first observation when the first rollout acts on it.
         self.obs_norm.load_state_dict(before)
-        self.num_envs = len(self.gym.gym_envs)
+        self.num_envs = len(self.env_state.gym_envs)
         self.steps = frames_per_batch // self.num_envs
         self.numpy_policy = NumpyPolicy.from_actor(self.policy)
         self.rng = np.random.default_rng(0)  # the policy's exploration noise (set_seed reseeds it)
@@ -83,7 +64,7 @@ class FastCollector(Collector):
 
     def _current_obs(self) -> np.ndarray:
         if self._obs is None:
-            self._obs = self.obs_norm(np.stack([env.last_obs for env in self.gym.gym_envs]), update=not self._counted)
+            self._obs = self.obs_norm(np.stack([env.last_obs for env in self.env_state.gym_envs]), update=not self._counted)
         return self._obs
 
     @torch.no_grad()
@@ -106,7 +87,7 @@ class FastCollector(Collector):
         trunc_buf = np.zeros((steps, n), bool)
         raw_next = np.empty((n, obs_dim))
         reward = np.empty(n)
-        envs = self.gym.gym_envs
+        envs = self.env_state.gym_envs
         act, normalize, scale_rewards = policy.act, self.obs_norm, self.reward_norm
         for t in range(steps):
             obs_buf[t] = obs
@@ -119,7 +100,7 @@ class FastCollector(Collector):
                 if term or trunc:
                     term_buf[t, i], trunc_buf[t, i] = term, trunc
                     reset_rows.append(i)
-            ep_return[t], ep_length[t] = self.gym.episodes()  # each env's episode so far (before any reset)
+            ep_return[t], ep_length[t] = self.env_state.episodes()  # each env's episode so far (before any reset)
             # The stats see every observation the env emits, as on TorchRL's path: each step's next
             # observation (a final one too), then the reset observation where an episode ended.
             next_obs = normalize(raw_next)
@@ -159,25 +140,21 @@ class FastCollector(Collector):
         return self._out
 
     def state_dict(self):
-        """TorchRL's (the env's transforms hold the statistics) and where each env is ("positions": the
-        simulator, the episode so far, the observation acted on next and the exploration RNG, so a
-        resumed run continues bit-exactly), "env_metrics" for the main process of a multi-process run;
-        packed in one entry (packed_state). The policy's weights are left out: the learner holds them
-        and sends them before each batch."""
+        """TorchRL's (the env's EnvState: statistics, episodes, positions) and this collector's own ("fast": the
+        observation each env's policy acts on next and the exploration RNG), packed in one entry
+        (internals.pickle_part). The policy's weights are left out: the learner holds them and sends them."""
         state = super().state_dict()
         state.pop("policy_state_dict", None)
-        state["positions"] = {"envs": self.gym.positions(), "obs": self._current_obs().copy(),
-                              "rng": self.rng.bit_generator.state}
-        state["env_metrics"] = self.gym.env_metrics()
-        return packed_state(state)
+        state[OWN] = {"obs": self._current_obs().copy(), "rng": self.rng.bit_generator.state}
+        return pickle_part(state)
 
     def load_state_dict(self, state_dict, **kwargs) -> None:
-        state = open_state(state_dict)
-        positions = state.pop("positions", None)
-        state.pop("env_metrics", None)
+        """A saved state (resume): the statistics and each env where it was; the merged statistics between
+        batches (no positions, no "fast"): each env stays where it is."""
+        state = worker_parts(state_dict)[0]  # opened
+        own = state.pop(OWN, None)
         kwargs.setdefault("strict", False)
-        super().load_state_dict({"frames": self._frames, "iter": self._iter, **state}, **kwargs)
-        if positions is not None and len(positions["obs"]) == self.num_envs \
-                and self.gym.continue_from(positions["envs"], now=True):
-            self._obs = np.asarray(positions["obs"]).copy()
-            self.rng.bit_generator.state = positions["rng"]
+        super().load_state_dict(keep_counters(self, state), **kwargs)
+        if own is not None and len(own["obs"]) == self.num_envs and self.env_state.continue_episodes(now=True):
+            self._obs = np.asarray(own["obs"]).copy()
+            self.rng.bit_generator.state = own["rng"]

@@ -16,6 +16,7 @@ from typing import Optional
 
 from omegaconf import OmegaConf
 
+from ppo_torchrl.collectors.internals import mark_started_ray, started_ray, worker_processes
 from ppo_torchrl.envs import make_torchrl_env
 from ppo_torchrl.errors import ConfigError, EnvironmentFault
 from ppo_torchrl.loggers import quiet_mujoco
@@ -70,7 +71,7 @@ class WorkerWatch:
     @classmethod
     def of(cls, collector) -> Optional["WorkerWatch"]:
         """A watch over a multi-process collector's workers (None for Ray, or off the main thread)."""
-        procs = getattr(collector, "procs", None)
+        procs = worker_processes(collector)
         if not procs or threading.current_thread() is not threading.main_thread():
             return None
         return cls(procs)
@@ -123,7 +124,7 @@ class WorkerWatch:
 
 def shutdown_ray(collector) -> None:
     """The local Ray instance this run started (a cluster joined stays up)."""
-    if getattr(collector, "_ppo_started_ray", False):
+    if started_ray(collector):
         import ray
 
         ray.shutdown()
@@ -169,5 +170,5 @@ def make_ray_collector(c, make_env: list, policy, kwargs: dict):
     kwargs["total_frames"] = sys.maxsize  # RayCollector reads -1 (endless) as "nothing to collect"
     collector = RayCollector(make_env, policy, sync=True, num_collectors=c.workers,
                              remote_configs={"num_cpus": 1, "memory": 1024**3}, **kwargs)
-    collector._ppo_started_ray = started
+    mark_started_ray(collector, started)
     return collector

@@ -1,0 +1,176 @@
+"""The one owner of env-side state: `EnvState`, the first transform of every training env's chain.
+
+An env of `envs.make_torchrl_env` is `TransformedEnv(GymWrapper(...))`; `EnvState` holds, for the envs under
+it (in env order):
+- the Gymnasium envs themselves (the fast collector steps them; evaluate films `gym_envs[0]`);
+- both normalizers (normalization.py): the observation statistics and the return statistics with each env's
+  discounted return so far. The `ObservationNormalization` / `RewardNormalization` transforms later in the
+  chain apply them to TorchRL's data; they hold no state of their own;
+- each env's episode so far (Gymnasium's `RecordEpisodeStatistics`), written to every step and reset as
+  TorchRL's `episode_reward` / `step_count` (RewardSum's and StepCounter's keys);
+- the env metrics (a step env's curriculum level and recent success rate), averaged over the envs once;
+- each env's position (positions.py: simulator, time limit, RNG, episode so far, last observation).
+
+Its state is one snapshot, `{"obs", "reward", "metrics", "positions"}`, with a small API that every collector
+and every scale uses:
+- `snapshot()` / `restore(snapshot)`: the whole of it, or the parts given (stats without positions: each
+  env stays where it is; positions are held until `continue_episodes` puts each env back);
+- `merge(base, parts)`: several workers' snapshots as one: exact pooled statistics, metrics averaged;
+- `shared(merged)`: what a worker loads back after a merge (its own discounted returns kept).
+TorchRL carries the snapshot as this transform's extra state, so any TorchRL collector's `state_dict()`
+(one process, `MultiSyncCollector`, `RayCollector`) holds it in one entry, pickled into one `bytes` value:
+TorchRL's workers turn state dicts into TensorDicts, where RNG states and Python floats would not survive.
+"""
+
+from __future__ import annotations
+
+import pickle
+from typing import Dict, List, Optional
+
+import numpy as np
+import torch
+from tensordict import TensorDictBase
+from torchrl.data import Composite, Unbounded
+from torchrl.envs.transforms import Transform
+
+from ppo_torchrl.normalization import ObservationNormalizer, RewardNormalizer, pooled
+from ppo_torchrl.positions import ResumableReset
+
+EPISODE_KEYS = ("episode_reward", "step_count")
+PACKED = "packed"
+
+
+class EnvState(Transform):
+    def __init__(self, envs: List[ResumableReset], obs_norm: ObservationNormalizer,
+                 reward_norm: Optional[RewardNormalizer] = None):
+        super().__init__(in_keys=[], out_keys=list(EPISODE_KEYS))
+        self.gym_envs = envs
+        self.obs_norm, self.reward_norm = obs_norm, reward_norm
+        self.held_positions: Optional[list] = None  # restored, waiting for continue_episodes
+
+    # ------------------------------------------------------------------ the episodes, in TorchRL's keys
+    def episodes(self) -> tuple:
+        """The return and length of each env's episode so far: ([n], [n]) arrays."""
+        records = [env.record for env in self.gym_envs]
+        return (np.array([r.episode_returns for r in records], np.float64),
+                np.array([r.episode_lengths for r in records], np.int64))
+
+    def _write_episodes(self, data: TensorDictBase) -> TensorDictBase:
+        shape = self.parent.batch_size + (1,)
+        returns, lengths = self.episodes()
+        data.set("episode_reward", torch.from_numpy(returns).reshape(shape))
+        data.set("step_count", torch.from_numpy(lengths).reshape(shape))
+        return data
+
+    def _call(self, next_tensordict: TensorDictBase) -> TensorDictBase:
+        return self._write_episodes(next_tensordict)
+
+    def _reset(self, tensordict: TensorDictBase, tensordict_reset: TensorDictBase) -> TensorDictBase:
+        return self._write_episodes(tensordict_reset)
+
+    def transform_observation_spec(self, observation_spec: Composite) -> Composite:
+        shape = self.parent.batch_size + (1,)
+        observation_spec["episode_reward"] = Unbounded(shape=shape, dtype=torch.float64)  # as Gymnasium sums it
+        observation_spec["step_count"] = Unbounded(shape=shape, dtype=torch.int64)
+        return observation_spec
+
+    # ------------------------------------------------------------------ metrics and positions
+    def env_metrics(self) -> Dict[str, float]:
+        """Scalars the envs keep, logged each iteration: a step env's curriculum level and recent success
+        rate (`LocomotionEnv.terrain_metrics`), the mean over the envs; {} where the envs say nothing."""
+        reports = [env.unwrapped.terrain_metrics() for env in self.gym_envs
+                   if hasattr(env.unwrapped, "terrain_metrics")]
+        reports = [r for r in reports if r]
+        return {key: float(np.mean([r[key] for r in reports])) for key in reports[0]} if reports else {}
+
+    def positions(self) -> list:
+        return [env.position() for env in self.gym_envs]
+
+    def continue_episodes(self, now: bool) -> bool:
+        """Each env continues the episode of the positions `restore` held: `now` (the fast collector), or at
+        its next reset (TorchRL's Collector resets its envs when it starts). False, changing nothing, when
+        none are held or their count differs."""
+        positions, self.held_positions = self.held_positions, None
+        if positions is None or len(positions) != len(self.gym_envs):
+            return False
+        for env, position in zip(self.gym_envs, positions):
+            if now:
+                env.restore(position)
+            else:
+                env.pending = position
+        return True
+
+    # ------------------------------------------------------------------ the state: snapshot, restore, merge
+    def snapshot(self, positions: bool = True) -> dict:
+        return {"obs": self.obs_norm.state_dict(),
+                "reward": self.reward_norm.state_dict() if self.reward_norm is not None else None,
+                "metrics": self.env_metrics(),
+                "positions": self.positions() if positions else None}
+
+    def restore(self, snapshot: dict, returns: bool = True) -> None:
+        """Load the parts of `snapshot` given: the statistics (each env's discounted return too when
+        `returns`), and positions, held for `continue_episodes`."""
+        if snapshot.get("obs") is not None:
+            self.obs_norm.load_state_dict(snapshot["obs"])
+        if snapshot.get("reward") is not None and self.reward_norm is not None:
+            self.reward_norm.load_state_dict(snapshot["reward"], running=returns)
+        if snapshot.get("positions") is not None:
+            self.held_positions = snapshot["positions"]
+
+    @staticmethod
+    def merge(base: Optional[dict], parts: List[dict]) -> dict:
+        """The workers' snapshots as one: each part is `base` (the stats every worker started the batch from)
+        plus what that worker added; the result holds all of it exactly (normalization.pool), the metrics
+        averaged over the workers (each already the mean over its envs). No positions: each env stays."""
+        base = base or {}
+        reward_parts = [p["reward"] for p in parts if p.get("reward") is not None]
+        metrics = [p["metrics"] for p in parts if p.get("metrics")]
+        return {"obs": pooled(base.get("obs"), [p.get("obs") for p in parts]),
+                "reward": pooled(base.get("reward"), reward_parts) if reward_parts else None,
+                "metrics": {k: float(np.mean([m[k] for m in metrics])) for k in metrics[0]} if metrics else {},
+                "positions": None}
+
+    @staticmethod
+    def shared(merged: dict, own: dict) -> dict:
+        """What a worker whose snapshot is `own` loads after a merge: the merged statistics, its own envs'
+        discounted returns, no positions (each env stays where it is)."""
+        reward = merged.get("reward")
+        if reward is not None and own.get("reward") is not None:
+            reward = {**reward, "returns": own["reward"]["returns"]}
+        return {"obs": merged.get("obs"), "reward": reward, "metrics": merged.get("metrics"), "positions": None}
+
+    # ------------------------------------------------------------------ TorchRL's face of the state
+    def get_extra_state(self) -> dict:
+        return {PACKED: pickle.dumps(self.snapshot())}
+
+    def set_extra_state(self, state) -> None:
+        snapshot = unpack(state)
+        if snapshot:
+            self.restore(snapshot)
+
+
+def unpack(state) -> Optional[dict]:
+    """An EnvState's extra state as it comes back from anywhere (a TensorDict from a worker too) as a snapshot."""
+    if state is None:
+        return None
+    if hasattr(state, "to_dict"):
+        state = state.to_dict()
+    packed = dict(state).get(PACKED)
+    if packed is None:
+        return None
+    if isinstance(packed, torch.Tensor):  # bytes that travelled as a uint8 tensor
+        packed = packed.numpy().tobytes()
+    return pickle.loads(packed)
+
+
+def pack(snapshot: dict) -> dict:
+    return {PACKED: pickle.dumps(snapshot)}
+
+
+def env_state_of(env) -> EnvState:
+    """The EnvState of an env of `envs.make_torchrl_env` (TypeError for any other env)."""
+    transforms = list(getattr(env, "transform", None) or [])
+    state = next((t for t in transforms if isinstance(t, EnvState)), None)
+    if state is None:
+        raise TypeError("not an env of envs.make_torchrl_env (no EnvState transform)")
+    return state
