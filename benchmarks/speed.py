@@ -9,6 +9,7 @@ run alternately A B A B so drift on the machine hits both sides alike.
     python benchmarks/speed.py --batched          # also 8 envs x 256 steps
     python benchmarks/speed.py --no-sb3           # the app alone (SB3 not installed)
     python benchmarks/speed.py --backends fast,torchrl --batched   # both collector backends beside SB3
+    python benchmarks/speed.py --backends fast,torchrl --envs 1,8,16 --no-sb3 --rounds 1   # the two paths by env count
 
 SB3 is a benchmark-only dependency: `pip install -e ".[bench]"` (or `make bench`).
 """
@@ -108,6 +109,7 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=49_152)
     parser.add_argument("--rounds", type=int, default=2)
     parser.add_argument("--batched", action="store_true", help="also run 8 envs x 256 steps per batch")
+    parser.add_argument("--envs", help="the env counts to run, comma-separated, e.g. 1,8,16 (instead of --batched)")
     parser.add_argument("--no-sb3", action="store_true")
     parser.add_argument("--backends", default="fast", help="collector backends of the app, comma-separated")
     parser.add_argument("--child", choices=["app", "sb3"], help=argparse.SUPPRESS)
@@ -120,7 +122,7 @@ def main() -> None:
 
     raw = raw_env_rate()
     print(f"raw gymnasium {ENV_ID} step, random actions: {raw:,.0f} steps/s")
-    settings = [1] + ([8] if args.batched else [])
+    settings = [int(n) for n in args.envs.split(",")] if args.envs else [1] + ([8] if args.batched else [])
     for num_envs in settings:
         print(f"\n{ENV_ID}, {num_envs} env(s) x {2048 // num_envs} steps, {args.frames} frames, "
               f"10 epochs x minibatch 64, whole process:")

@@ -8,14 +8,16 @@ it (in env order):
   chain apply them to TorchRL's data; they hold no state of their own;
 - each env's episode so far (Gymnasium's `RecordEpisodeStatistics`), written to every step and reset as
   TorchRL's `episode_reward` / `step_count` (RewardSum's and StepCounter's keys);
-- the env metrics (a step env's curriculum level and recent success rate), averaged over the envs once;
-- each env's position (positions.py: simulator, time limit, RNG, episode so far, last observation).
+- the env metrics (a step env's curriculum level and recent success rate): each env's, averaged once, over
+  every env of every worker, where they are logged (`mean_metrics`);
+- each env's position (positions.py: simulator, time limit, RNG, episode so far, last observation) and the
+  normalized observation its policy acts on next.
 
 Its state is one snapshot, `{"obs", "reward", "metrics", "positions"}`, with a small API that every collector
 and every scale uses:
 - `snapshot()` / `restore(snapshot)`: the whole of it, or the parts given (stats without positions: each
   env stays where it is; positions are held until `continue_episodes` puts each env back);
-- `merge(base, parts)`: several workers' snapshots as one: exact pooled statistics, metrics averaged;
+- `merge(base, parts)`: several workers' snapshots as one: exact pooled statistics, every env's metrics;
 - `shared(merged)`: what a worker loads back after a merge (its own discounted returns kept).
 TorchRL carries the snapshot as this transform's extra state, so any TorchRL collector's `state_dict()`
 (one process, `MultiSyncCollector`, `RayCollector`) holds it in one entry, pickled into one `bytes` value:
@@ -75,29 +77,33 @@ class EnvState(Transform):
         return observation_spec
 
     # ------------------------------------------------------------------ metrics and positions
-    def env_metrics(self) -> Dict[str, float]:
-        """Scalars the envs keep, logged each iteration: a step env's curriculum level and recent success
-        rate (`LocomotionEnv.terrain_metrics`), the mean over the envs; {} where the envs say nothing."""
+    def env_metrics(self) -> List[Dict[str, float]]:
+        """Scalars each env keeps, logged each iteration: a step env's curriculum level and recent success rate
+        (`LocomotionEnv.terrain_metrics`), one dict per env that says something ([] where none does)."""
         reports = [env.unwrapped.terrain_metrics() for env in self.gym_envs
                    if hasattr(env.unwrapped, "terrain_metrics")]
-        reports = [r for r in reports if r]
-        return {key: float(np.mean([r[key] for r in reports])) for key in reports[0]} if reports else {}
+        return [r for r in reports if r]
 
     def positions(self) -> list:
         return [env.position() for env in self.gym_envs]
 
     def continue_episodes(self, now: bool) -> bool:
-        """Each env continues the episode of the positions `restore` held: `now` (the fast collector), or at
-        its next reset (TorchRL's Collector resets its envs when it starts). False, changing nothing, when
-        none are held or their count differs."""
-        positions, self.held_positions = self.held_positions, None
-        if positions is None or len(positions) != len(self.gym_envs):
+        """Each env continues the episode of the positions `restore` held: `now` (the fast collector: the
+        observation each policy acts on next is `obs_norm.emitted`), or at its next reset (TorchRL's Collector
+        resets its envs when it starts; that reset gives back the saved normalized observation, uncounted).
+        False, changing nothing, when none are held or their count differs."""
+        held, self.held_positions = self.held_positions, None
+        if held is None or len(held["envs"]) != len(self.gym_envs):
             return False
-        for env, position in zip(self.gym_envs, positions):
+        for env, position in zip(self.gym_envs, held["envs"]):
             if now:
                 env.restore(position)
             else:
                 env.pending = position
+        if now:
+            self.obs_norm.emitted = held["acted_on"]
+        else:
+            self.obs_norm.replay = held["acted_on"]
         return True
 
     # ------------------------------------------------------------------ the state: snapshot, restore, merge
@@ -105,7 +111,12 @@ class EnvState(Transform):
         return {"obs": self.obs_norm.state_dict(),
                 "reward": self.reward_norm.state_dict() if self.reward_norm is not None else None,
                 "metrics": self.env_metrics(),
-                "positions": self.positions() if positions else None}
+                "positions": {"envs": self.positions(), "acted_on": self._acted_on()} if positions else None}
+
+    def _acted_on(self) -> Optional[np.ndarray]:
+        """The normalized observation each env's policy acts on next (None before any)."""
+        emitted = self.obs_norm.emitted
+        return None if emitted is None else np.asarray(emitted).copy()
 
     def restore(self, snapshot: dict, returns: bool = True) -> None:
         """Load the parts of `snapshot` given: the statistics (each env's discounted return too when
@@ -120,14 +131,13 @@ class EnvState(Transform):
     @staticmethod
     def merge(base: Optional[dict], parts: List[dict]) -> dict:
         """The workers' snapshots as one: each part is `base` (the stats every worker started the batch from)
-        plus what that worker added; the result holds all of it exactly (normalization.pool), the metrics
-        averaged over the workers (each already the mean over its envs). No positions: each env stays."""
+        plus what that worker added; the result holds all of it exactly (normalization.pool), and every env's
+        metrics. No positions: each env stays."""
         base = base or {}
         reward_parts = [p["reward"] for p in parts if p.get("reward") is not None]
-        metrics = [p["metrics"] for p in parts if p.get("metrics")]
         return {"obs": pooled(base.get("obs"), [p.get("obs") for p in parts]),
                 "reward": pooled(base.get("reward"), reward_parts) if reward_parts else None,
-                "metrics": {k: float(np.mean([m[k] for m in metrics])) for k in metrics[0]} if metrics else {},
+                "metrics": [m for p in parts for m in p.get("metrics") or []],
                 "positions": None}
 
     @staticmethod
@@ -174,3 +184,9 @@ def env_state_of(env) -> EnvState:
     if state is None:
         raise TypeError("not an env of envs.make_torchrl_env (no EnvState transform)")
     return state
+
+
+def mean_metrics(reports: List[Dict[str, float]]) -> Dict[str, float]:
+    """The env metrics as logged: each key's mean over every env that reports it ({} for none)."""
+    keys = dict.fromkeys(k for r in reports for k in r)
+    return {k: float(np.mean([r[k] for r in reports if k in r])) for k in keys}

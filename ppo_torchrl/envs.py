@@ -17,6 +17,7 @@ from typing import Optional, Sequence
 import gymnasium as gym
 import numpy as np
 import torch
+from omegaconf import OmegaConf
 from torchrl.envs import Compose, GymWrapper, Transform, TransformedEnv
 
 from ppo_torchrl.errors import ConfigError
@@ -325,7 +326,16 @@ def extra_transforms(env_cfg) -> list:
     return built
 
 
+_SPARE: dict = {}  # the env config's key -> the Gymnasium env that env_spec built: a training env's first
+
+
+def _key(env_cfg) -> str:
+    return OmegaConf.to_yaml(env_cfg, resolve=True)
+
+
 def env_spec(env_cfg) -> EnvSpec:
+    """The env's sizes and action bounds. The env built to read them is kept (one, the latest) for the training
+    env of the same config, so that a run builds its env once before step 1."""
     env = make_gym_env(env_cfg)
     if env_cfg.transforms.extra:  # the observation the networks see is the transformed one
         torchrl_env = make_torchrl_env(env_cfg, clip_actions=False, gamma=0.99)
@@ -346,7 +356,10 @@ def env_spec(env_cfg) -> EnvSpec:
         action_low=env.action_space.low.astype(np.float32),
         action_high=env.action_space.high.astype(np.float32),
     )
-    env.close()
+    for spare in _SPARE.values():
+        spare.close()
+    _SPARE.clear()
+    _SPARE[_key(env_cfg)] = env
     return spec
 
 
@@ -375,7 +388,10 @@ def make_torchrl_env(
     seed: each env i is reset with seed + i once built, so that everything that follows is reproducible.
     """
     t = env_cfg.transforms
-    gym_envs = [resumable(make_gym_env(env_cfg, render_mode, not train, **render_kwargs)) for _ in range(num_envs)]
+    spare = _SPARE.pop(_key(env_cfg), None) if train and render_mode is None else None  # env_spec's, unused
+    gym_envs = [resumable(spare if i == 0 and spare is not None else make_gym_env(env_cfg, render_mode, not train,
+                                                                                  **render_kwargs))
+                for i in range(num_envs)]
     if seed is not None:
         for i, env in enumerate(gym_envs):
             env.reset(seed=seed + i)
@@ -391,11 +407,8 @@ def make_torchrl_env(
     obs_dim = int(gym_envs[0].observation_space.shape[0])
     if not train and t.obs_norm != "none" and obs_stats is None:
         raise ValueError("a frozen observation normalization needs obs_stats")
-    obs_norm = make_observation_normalizer(t, obs_dim, obs_stats, frozen=not train)
-    if train and t.obs_norm == "fixed" and obs_stats is None:  # fitted on an env of its own, then frozen
-        fit_env = make_gym_env(env_cfg)
-        obs_norm.fit_fixed(fit_env, t.obs_norm_init_frames, 0 if seed is None else seed)
-        fit_env.close()
+    obs_norm = make_observation_normalizer(t, obs_dim, obs_stats, frozen=not train, seed=0 if seed is None else seed,
+                                           fit_env=functools.partial(make_gym_env, env_cfg) if train else None)
     reward_norm = make_reward_normalizer(t, num_envs, gamma) if train else None
     transforms = [EnvState(gym_envs, obs_norm, reward_norm)]
     if clip_actions:  # Normal head: the env gets the clipped action, the batch keeps the sample

@@ -27,7 +27,25 @@ from torch import nn
 from torchrl.data import Unbounded
 from torchrl.envs.transforms import ObservationTransform, Transform
 
-REWARD_MODES = ("return", "scale", "none")
+OBS_MODES = ("running", "fixed", "none")  # env.transforms.obs_norm
+REWARD_MODES = ("return", "scale", "none")  # env.transforms.reward_norm
+
+
+def transforms_checks(t) -> list:
+    """(ok, the one line if not) for each value of `env.transforms` (config.TransformsConfig) read here."""
+    def positive_or_null(v):
+        return v is None or v > 0
+
+    return [
+        (t.obs_norm in OBS_MODES, f"env.transforms.obs_norm='{t.obs_norm}' is not known; use one of {', '.join(OBS_MODES)}"),
+        (t.reward_norm in REWARD_MODES,
+         f"env.transforms.reward_norm='{t.reward_norm}' is not known; use one of {', '.join(REWARD_MODES)}"),
+        (t.obs_norm_init_frames >= 2, f"env.transforms.obs_norm_init_frames={t.obs_norm_init_frames} must be >= 2"),
+        (positive_or_null(t.obs_clip), f"env.transforms.obs_clip={t.obs_clip} must be > 0 (or null: no clipping)"),
+        (positive_or_null(t.reward_clip), f"env.transforms.reward_clip={t.reward_clip} must be > 0 (or null: no clipping)"),
+        (t.reward_scale > 0, f"env.transforms.reward_scale={t.reward_scale} must be > 0"),
+        (t.norm_epsilon > 0, f"env.transforms.norm_epsilon={t.norm_epsilon} must be > 0"),
+    ]
 
 
 def obs_scale(var, epsilon: float):
@@ -136,6 +154,11 @@ class ObservationNormalizer:
         self.epsilon = epsilon
         self.enabled = enabled
         self.before_reset: Optional[dict] = None  # the statistics before a full reset no step has followed yet
+        # What the policy acts on next, as it saw it: each env's last normalized observation (TorchRL's face and the
+        # fast collector keep it; a resume gives it back instead of normalizing the raw one again with statistics
+        # that have moved since), and the rows the next full reset gives back (EnvState.continue_episodes)
+        self.emitted: Optional[np.ndarray] = None
+        self.replay: Optional[np.ndarray] = None
 
     @property
     def frozen(self) -> bool:
@@ -198,12 +221,18 @@ class FrozenNormalization(nn.Module):
 
 
 def make_observation_normalizer(transforms_cfg, obs_dim: int, stats: Optional[dict] = None,
-                                frozen: bool = False) -> ObservationNormalizer:
-    """From `env.transforms`; with `stats` (a checkpoint's), loaded, and frozen if asked."""
+                                frozen: bool = False, fit_env=None, seed: int = 0) -> ObservationNormalizer:
+    """From `env.transforms`; with `stats` (a checkpoint's), loaded, and frozen if asked. A training env's
+    `fixed` statistics without `stats`: fitted on random rollouts of `fit_env()` (an env of their own), then
+    frozen."""
     t = transforms_cfg
     norm = ObservationNormalizer((obs_dim,), t.obs_clip, t.norm_epsilon, enabled=t.obs_norm != "none")
     if stats is not None:
         norm.load_state_dict(stats)
+    elif t.obs_norm == "fixed" and fit_env is not None:
+        env = fit_env()
+        norm.fit_fixed(env, t.obs_norm_init_frames, seed)
+        env.close()
     if frozen:
         norm.freeze()
     return norm
@@ -246,7 +275,9 @@ class ObservationNormalization(ObservationTransform):
 
     def _call(self, next_tensordict: TensorDictBase) -> TensorDictBase:
         self.normalizer.before_reset = None
-        return next_tensordict.set("observation", self._normalize(next_tensordict.get("observation")))
+        out = self._normalize(next_tensordict.get("observation"))
+        self.normalizer.emitted = out.cpu().numpy().copy()
+        return next_tensordict.set("observation", out)
 
     def _reset(self, tensordict: TensorDictBase, tensordict_reset: TensorDictBase) -> TensorDictBase:
         mask = tensordict.get("_reset", None) if tensordict is not None else None
@@ -254,11 +285,22 @@ class ObservationNormalization(ObservationTransform):
         if mask is not None:
             mask = mask.reshape(obs.shape[:-1])
         norm = self.normalizer
-        if mask is None or bool(mask.all()):
+        full = mask is None or bool(mask.all())
+        if full and norm.replay is not None:  # saved episodes continue: what the policy was to act on, uncounted
+            replay, norm.replay, norm.before_reset = norm.replay, None, None
+            norm.emitted = np.asarray(replay, np.float32).reshape(obs.shape).copy()
+            return tensordict_reset.set("observation", torch.from_numpy(norm.emitted.copy()).to(obs.device))
+        if full:
             if norm.before_reset is not None and not norm.frozen:  # the last reset's observations: never acted on
                 norm.stats.load_state_dict(norm.before_reset)
             norm.before_reset = norm.stats.state_dict()
-        return tensordict_reset.set("observation", self._normalize(obs, mask))
+        out = self._normalize(obs, mask)
+        rows = out.cpu().numpy()
+        if full or norm.emitted is None or norm.emitted.shape != rows.shape:
+            norm.emitted = rows.copy()
+        else:
+            norm.emitted[mask.cpu().numpy()] = rows[mask.cpu().numpy()]
+        return tensordict_reset.set("observation", out)
 
 
 class ReturnNormalizer:

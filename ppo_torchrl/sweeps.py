@@ -133,9 +133,9 @@ def check_stored_study(study, space: list[str]) -> str:
     are marked failed. Returns what it did, for the line."""
     import optuna
 
-    from hydra_plugins.hydra_optuna_sweeper._impl import create_params_from_overrides
+    from ppo_torchrl.internals import optuna_space
 
-    wanted, _ = create_params_from_overrides(space)
+    wanted = optuna_space(space)
     trials = study.get_trials(deepcopy=False)
     for trial in trials:
         for key, distribution in trial.distributions.items():

@@ -16,8 +16,6 @@ from ppo_torchrl.errors import ConfigError
 SEED_LIMIT = 2**32  # numpy's and gymnasium's seeds are 32-bit
 MAX_TOTAL_FRAMES = 10**12  # a trillion frames is years on any machine: a larger budget is a typo
 COMPILE_CHOICES = ("auto", "true", "false")
-OBS_NORMS = ("running", "fixed", "none")
-REWARD_NORMS = ("return", "scale", "none")
 CRITIC_LOSSES = ("l2", "l1", "smooth_l1")
 DISTRIBUTED = ("ray",)
 RAY_INSTALL = 'pip install -e ".[ray]" (or: pip install "ray[default]<3")'
@@ -47,6 +45,7 @@ def validate_config(cfg):
     from ppo_torchrl.loggers import LOGGERS
     from ppo_torchrl.losses import LOSSES, OPTIMIZERS, NOT_COMPILABLE
     from ppo_torchrl.models import validate_policy_config
+    from ppo_torchrl.normalization import transforms_checks
 
     missing = sorted(OmegaConf.missing_keys(cfg))
     if missing:
@@ -109,13 +108,7 @@ def validate_config(cfg):
         one_of("advantage.name", adv.name, ESTIMATORS),
         (0 <= adv.gamma <= 1 and 0 <= adv.lmbda <= 1,
          f"advantage.gamma={adv.gamma} and advantage.lmbda={adv.lmbda} must lie in [0, 1]"),
-        one_of("env.transforms.obs_norm", t.obs_norm, OBS_NORMS),
-        one_of("env.transforms.reward_norm", t.reward_norm, REWARD_NORMS),
-        (t.obs_norm_init_frames >= 2, f"env.transforms.obs_norm_init_frames={t.obs_norm_init_frames} must be >= 2"),
-        (positive_or_null(t.obs_clip), f"env.transforms.obs_clip={t.obs_clip} must be > 0 (or null: no clipping)"),
-        (positive_or_null(t.reward_clip), f"env.transforms.reward_clip={t.reward_clip} must be > 0 (or null: no clipping)"),
-        (t.reward_scale > 0, f"env.transforms.reward_scale={t.reward_scale} must be > 0"),
-        (t.norm_epsilon > 0, f"env.transforms.norm_epsilon={t.norm_epsilon} must be > 0"),
+        *transforms_checks(t),  # beside the normalization they configure (normalization.py)
         (positive_or_null(env.max_episode_steps),
          f"env.max_episode_steps={env.max_episode_steps} must be > 0 (or null: the env's own limit)"),
         (env.locomotion.frame_skip >= 1, f"env.locomotion.frame_skip={env.locomotion.frame_skip} must be >= 1"),

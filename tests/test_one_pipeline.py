@@ -137,7 +137,7 @@ def test_episode_counts_have_one_owner_gymnasiums_counter_which_a_resumed_episod
 
     again = make()
     again_state = env_state_of(again)
-    again_state.restore({"positions": state.positions()})
+    again_state.restore({"positions": {"envs": state.positions(), "acted_on": None}})
     assert again_state.continue_episodes(now=False)
     first = again.reset()
     assert first["step_count"].squeeze(-1).tolist() == lengths.tolist()
@@ -152,7 +152,7 @@ def test_every_path_and_scale_counts_the_same(tiny_cfg, backend, scale):
     next observation and every reset after a done; the return statistics each frame once after their prior;
     each finished episode is logged once with Gymnasium's return and length; every env's position is in
     its EnvState's snapshot."""
-    from ppo_torchrl.collectors.internals import env_snapshot, worker_parts
+    from ppo_torchrl.internals import env_snapshot, worker_parts
 
     envs = "collector.num_envs=2" if scale else "collector.num_envs=4"
     cfg = tiny_cfg(f"collector.backend={backend}", envs, *scale, "env.max_episode_steps=30")
@@ -165,7 +165,7 @@ def test_every_path_and_scale_counts_the_same(tiny_cfg, backend, scale):
         episodes = collection.pop_episodes()
         state = collection.state_dict()
         parts = worker_parts(state["collector"])
-        positions = sum(len(env_snapshot(part, collection._key)["positions"]) for part in parts)
+        positions = sum(len(env_snapshot(part, collection._key)["positions"]["envs"]) for part in parts)
     finally:
         collection.close()
     assert frames == 3 * cfg.collector.frames_per_batch and dones > 4

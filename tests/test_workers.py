@@ -82,16 +82,16 @@ def test_workers_collect_exact_on_policy_batches_and_share_one_set_of_stats(tiny
                 p.fill_(-30.0 if name.endswith("log_std") else 0.0)  # mean 0, std e^-30: every action ~0
         batch = collector.collect()
         assert batch["action"].abs().max() < 1e-6  # every worker drew with the learner's new weights
-        from ppo_torchrl.collectors.internals import env_snapshot
+        from ppo_torchrl.internals import env_snapshot
 
         mine = collector.state.snapshot(positions=False)  # the merged set, in the main process's EnvState
         _, workers = collector._worker_states()
-        # every worker's EnvState holds where each env is; FastCollector adds its own ("fast": the next obs, RNG)
+        # every worker's EnvState holds where each env is; FastCollector adds its own ("fast": its RNG)
         assert all(("fast" in w) == (backend == "fast") for w in workers)
         assert len(workers) == 2
         for worker in workers:
             theirs = env_snapshot(worker, collector._key)
-            assert len(theirs["positions"]) == 2  # collector.num_envs in this worker
+            assert len(theirs["positions"]["envs"]) == 2  # collector.num_envs in this worker
             for kind in ("obs", "reward"):  # the observation and return statistics
                 for name in set(mine[kind]) - {"returns"}:
                     torch.testing.assert_close(torch.as_tensor(theirs[kind][name]), torch.as_tensor(mine[kind][name]))

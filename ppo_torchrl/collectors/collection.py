@@ -6,9 +6,9 @@ state (statistics, episode counters, env metrics, positions) is the env's `EnvSt
 - finished episodes: read from the batch (`episode_reward`, `step_count`: Gymnasium's episode counters, as
   EnvState writes them), wherever the envs live;
 - with several workers each worker's EnvState grows during a batch; after it, the workers' snapshots are
-  merged (`EnvState.merge`: exact pooled statistics, the env metrics averaged once) into `self.state` (the
+  merged (`EnvState.merge`: exact pooled statistics, every env's metrics) into `self.state` (the
   main process's EnvState, never stepped) and loaded back into every worker (`EnvState.shared`), through
-  the collectors' public `state_dict()` / `load_state_dict()` (their layout: collectors/internals.py);
+  the collectors' public `state_dict()` / `load_state_dict()` (their layout: internals.py);
 - state for resume: the collector's, which holds each EnvState's snapshot (positions included); one path
   loads it for every collector and scale (TorchRL's Collector then restarts on the saved positions).
 
@@ -33,7 +33,7 @@ from tensordict import TensorDict
 
 from ppo_torchrl.collectors.choice import collector_class as collector_class_of
 from ppo_torchrl.collectors.choice import resolve_backend
-from ppo_torchrl.collectors.internals import env_snapshot, env_state_key, shared_part, with_worker_parts, worker_parts
+from ppo_torchrl.internals import env_snapshot, env_state_key, shared_part, with_worker_parts, worker_parts
 from ppo_torchrl.collectors.multiprocess import (
     WorkerWatch,
     make_multi_collector,
@@ -41,7 +41,7 @@ from ppo_torchrl.collectors.multiprocess import (
     warn_if_oversubscribed,
     worker_env,
 )
-from ppo_torchrl.env_state import EnvState, env_state_of
+from ppo_torchrl.env_state import EnvState, env_state_of, mean_metrics
 from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.envs import make_torchrl_env
 from ppo_torchrl.models import sampling_policy
@@ -75,7 +75,7 @@ class Collection:
         else:
             warn_if_oversubscribed(c)
             env_cfg = OmegaConf.to_container(cfg.env, resolve=True)
-            fixed = self.state.obs_norm.state_dict() if cfg.env.transforms.obs_norm == "fixed" else None  # fitted once
+            fixed = self.state.obs_norm.state_dict() if self.state.obs_norm.frozen else None  # fitted once, here
             make_env = [functools.partial(worker_env, env_cfg, num_envs=c.num_envs, obs_stats=fixed,
                                           seed=seed + 7919 * (i + 1), **env_kwargs) for i in range(c.workers)]
             # Workers start with SIGINT blocked (inherited): a Ctrl-C while they import is the main process's
@@ -98,10 +98,10 @@ class Collection:
             if self.multi:
                 self.collector.update_policy_weights_()  # every worker collects with the weights of the last update
                 batch = next(self._iterator)
-                self._metrics = self._merge_stats()
+                self._metrics = mean_metrics(self._merge_stats())  # over every env of every worker, once
             else:
                 batch = next(self._iterator)
-                self._metrics = self.state.env_metrics()
+                self._metrics = mean_metrics(self.state.env_metrics())
         except Exception:
             self._raise_if_a_worker_died()
             raise
@@ -151,9 +151,9 @@ class Collection:
         whole = self._collector_state()
         return whole, worker_parts(whole)
 
-    def _merge_stats(self) -> Dict[str, float]:
+    def _merge_stats(self) -> List[Dict[str, float]]:
         """Pool the workers' EnvStates into `self.state` and load the result back into every worker; returns
-        the env metrics, averaged over the workers."""
+        every env's metrics."""
         whole, workers = self._worker_states()
         # before the first merge the workers share only the return statistics' prior
         base = self._base or {"obs": None, "reward": self.state.snapshot(positions=False)["reward"]}
@@ -202,15 +202,11 @@ class Collection:
     def _continue_episodes(self) -> None:
         """Positions loaded that the collector did not take (TorchRL's Collector in this process; FastCollector
         puts its envs back itself, and workers' envs are theirs): a new Collector, whose first reset restores
-        each env's saved position; the saved observation is not counted again (statistics frozen for it)."""
+        each env's saved position and gives back the observation its policy was to act on (uncounted)."""
         if not self.state.continue_episodes(now=False):
             return
-        norm = self.state.obs_norm
-        was_frozen = norm.frozen
-        norm.freeze()
         self.collector.shutdown(close_env=False)
         self.collector = self._new_collector(self.env)
-        norm.freeze(was_frozen)
         self._iterator = iter(self.collector)
 
     def close(self) -> None:

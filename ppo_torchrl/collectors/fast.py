@@ -22,7 +22,7 @@ from tensordict import TensorDict
 from torchrl.collectors import Collector
 from torchrl.envs import EnvBase
 
-from ppo_torchrl.collectors.internals import OWN, keep_counters, pickle_part, worker_parts
+from ppo_torchrl.internals import OWN, keep_counters, pickle_part, worker_parts
 from ppo_torchrl.env_state import env_state_of
 from ppo_torchrl.models import NumpyPolicy
 
@@ -65,6 +65,7 @@ class FastCollector(Collector):
     def _current_obs(self) -> np.ndarray:
         if self._obs is None:
             self._obs = self.obs_norm(np.stack([env.last_obs for env in self.env_state.gym_envs]), update=not self._counted)
+            self.obs_norm.emitted = self._obs  # what EnvState saves as the observation each policy acts on next
         return self._obs
 
     @torch.no_grad()
@@ -112,7 +113,7 @@ class FastCollector(Collector):
                     self._traj_ids[i] = self._traj_ids.max() + 1
             next_buf[t] = next_obs
             rew_buf[t] = scale_rewards(reward, term_buf[t] | trunc_buf[t])
-        self._obs = obs
+        self._obs = self.obs_norm.emitted = obs
 
         def tensor(x: np.ndarray) -> torch.Tensor:  # [steps, n, ...] -> [n, steps, ...]
             return torch.from_numpy(np.ascontiguousarray(np.swapaxes(x, 0, 1)))
@@ -140,12 +141,13 @@ class FastCollector(Collector):
         return self._out
 
     def state_dict(self):
-        """TorchRL's (the env's EnvState: statistics, episodes, positions) and this collector's own ("fast": the
-        observation each env's policy acts on next and the exploration RNG), packed in one entry
+        """TorchRL's (the env's EnvState: statistics, episodes, positions, the observation each env's policy acts
+        on next) and this collector's own ("fast": the exploration RNG), packed in one entry
         (internals.pickle_part). The policy's weights are left out: the learner holds them and sends them."""
+        self._current_obs()  # in the EnvState's snapshot below: the observation each policy acts on next
         state = super().state_dict()
         state.pop("policy_state_dict", None)
-        state[OWN] = {"obs": self._current_obs().copy(), "rng": self.rng.bit_generator.state}
+        state[OWN] = {"rng": self.rng.bit_generator.state}
         return pickle_part(state)
 
     def load_state_dict(self, state_dict, **kwargs) -> None:
@@ -155,6 +157,6 @@ class FastCollector(Collector):
         own = state.pop(OWN, None)
         kwargs.setdefault("strict", False)
         super().load_state_dict(keep_counters(self, state), **kwargs)
-        if own is not None and len(own["obs"]) == self.num_envs and self.env_state.continue_episodes(now=True):
-            self._obs = np.asarray(own["obs"]).copy()
+        if own is not None and self.env_state.continue_episodes(now=True):
+            self._obs = np.asarray(self.obs_norm.emitted, np.float32).reshape(self.num_envs, -1).copy()
             self.rng.bit_generator.state = own["rng"]

@@ -16,7 +16,7 @@ from typing import Optional
 
 from omegaconf import OmegaConf
 
-from ppo_torchrl.collectors.internals import mark_started_ray, started_ray, worker_processes
+from ppo_torchrl.internals import mark_started_ray, started_ray, worker_processes
 from ppo_torchrl.envs import make_torchrl_env
 from ppo_torchrl.errors import ConfigError, EnvironmentFault
 from ppo_torchrl.loggers import quiet_mujoco

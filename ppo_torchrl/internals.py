@@ -1,5 +1,7 @@
-"""The one module that reads or writes what TorchRL's collectors do not publish, and why.
+"""The one module that reads or writes what a library does not publish, and why (Gymnasium's `TimeLimit`
+counter, for a bit-exact resume, stays in positions.py with the rest of an env's position).
 
+TorchRL's collectors:
 - The layout of a collector's `state_dict()`: in one process, the collector's own (`env_state_dict`: the
   env's transforms' state, `frames`, `iter`, ...); `MultiSyncCollector`: `{"worker0": <that>, "worker1": ...}`;
   `RayCollector`: a list of them. TorchRL has no accessor for one worker's env state, and the statistics of
@@ -9,11 +11,18 @@
   between batches carries the worker's own (`keep_counters`).
 - `MultiSyncCollector.procs`: the worker processes, whose sentinels `WorkerWatch` waits on (no accessor).
 - Whether this run started the local Ray instance it shuts down: an attribute set on the `RayCollector`.
+
+Hydra's Optuna sweeper: the search space a command's `key=choice(...)` overrides make, as the sweeper makes it
+(`_impl.create_params_from_overrides`), so a stored study is checked against the command before a trial runs.
+
+TorchRL's `CSVLogger`: its files (`logs/<name>/scalars/<key>.csv`, rows `step,value`), whose rows past a
+checkpoint a resume drops.
 """
 
 from __future__ import annotations
 
 import pickle
+from pathlib import Path
 from typing import Optional
 
 from ppo_torchrl.env_state import EnvState, pack, unpack
@@ -94,3 +103,16 @@ def mark_started_ray(collector, started: bool) -> None:
 
 def started_ray(collector) -> bool:
     return bool(getattr(collector, "_ppo_started_ray", False))
+
+
+def optuna_space(overrides: list) -> dict:
+    """The Optuna distributions of `key=choice(...)` / `interval(...)` overrides, as Hydra's Optuna sweeper
+    builds them."""
+    from hydra_plugins.hydra_optuna_sweeper._impl import create_params_from_overrides
+
+    return create_params_from_overrides(overrides)[0]
+
+
+def csv_logger_files(run_dir: Path) -> list:
+    """The scalar files TorchRL's CSVLogger writes under a run dir (rows: step,value)."""
+    return sorted((Path(run_dir) / "logs").glob("*/scalars/**/*.csv"))
