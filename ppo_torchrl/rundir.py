@@ -45,9 +45,11 @@ RUN_FILES = (r"config\.yaml|metrics\.csv|summary\.json|report\.png|policy\.pt|er
 OWNED = re.compile(rf"^(?:{RUN_FILES}|multirun\.yaml|optimization_results\.yaml|sweep_report\.(?:png|md|csv)|\.lock"
                    rf"|trial\.json|seed\d+/(?:{RUN_FILES}|{re.escape(MANIFEST)}))$")
 # Listed or not, these are the app's in an app's dir: a checkpoint or a temp file of a write cut short.
-# (Hydra's start-up files too: a run killed before it listed them; nothing is ever deleted for being here)
+# (Hydra's start-up files too, a sweep's multirun.yaml: a command killed before it listed them; nothing is ever
+# deleted for being here)
 UNLISTED_OK = re.compile(r"^(?:(?:seed\d+/)?checkpoints/(?:last|best|frames_\d+)\.pt|(?:.+/)?\.[^/]+\.tmp"
-                         r"|\.hydra/(?:config|hydra|overrides)\.yaml|__main__\.log)$")
+                         r"|\.hydra/(?:config|hydra|overrides)\.yaml|__main__\.log"
+                         r"|multirun\.yaml|optimization_results\.yaml)$")  # Hydra's: a sweep killed before it listed them
 
 ZOO = Path(__file__).resolve().parent.parent / "zoo"  # the shipped policies: read-only to every command
 _BEGAN_NS = time.time_ns()  # this process's start: `record` lists only the files written since

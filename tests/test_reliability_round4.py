@@ -301,3 +301,19 @@ def test_a_sweep_into_a_run_dir_is_told_it_holds_a_run_not_foreign_files(tmp_pat
     with pytest.raises(ConfigError, match="already holds a sweep.*overwrite=true"):
         rundir.check_new_dir(run, overwrite=False, what="sweep")
     rundir.check_new_dir(run, overwrite=True, what="sweep")  # replaceable
+
+
+def test_a_sweep_killed_before_it_listed_hydras_multirun_yaml_can_be_overwritten(tmp_path):
+    """kill -9 of a `-m` sweep after Hydra wrote multirun.yaml and before the sweep's listing (found by
+    benchmarks/data_safety.py --real): the dir is still the app's, and overwrite=true takes it."""
+    from ppo_torchrl import rundir
+    from ppo_torchrl.errors import ConfigError
+
+    sweep = tmp_path / "sweep"
+    rundir.claim(sweep, what="sweep")  # its manifest, listing nothing yet
+    (sweep / "multirun.yaml").write_text("hydra: {}\n")  # Hydra's, then the kill
+    rundir.release(sweep)
+    with pytest.raises(ConfigError, match="already holds a sweep"):
+        rundir.check_new_dir(sweep, overwrite=False, what="sweep")
+    rundir.check_new_dir(sweep, overwrite=True, what="sweep")
+    rundir.check_new_dir(sweep, overwrite=True, what="run")

@@ -14,6 +14,10 @@ from ppo_torchrl.errors import ConfigError
 BACKENDS = {"fast": ("ppo_torchrl.collectors.fast", "FastCollector", "actor", "FastCollector"),
             "torchrl": ("torchrl.collectors", "Collector", "sampling", "torchrl.Collector")}
 CHOICES = ("auto", *BACKENDS)  # collector.backend
+# TorchRL's Collector against FastCollector, whole-process frames/s on Hopper-v4 by collector.num_envs
+# (benchmarks/speed.py --backends fast,torchrl --envs 1,8,16: results/speed/torchrl_path_2026-11-27.txt):
+# its per-step transforms cost less per frame as one batched env steps more envs
+TORCHRL_PATH_SHARE = {1: 0.42, 8: 0.72, 16: 0.93}
 
 
 def resolve_backend(cfg) -> str:
@@ -36,6 +40,10 @@ def describe_backend(cfg) -> Tuple[str, str]:
         why = "no env.transforms.extra" if c.backend == "auto" else "collector.backend=fast"
     else:
         why = "env.transforms.extra runs per step" if c.backend == "auto" else "collector.backend=torchrl"
+        measured = max([n for n in TORCHRL_PATH_SHARE if n <= c.num_envs] or [1])
+        why += (f"; at collector.num_envs={c.num_envs} ~{TORCHRL_PATH_SHARE[measured]:.0%} of the fast collector's "
+                f"frames/s (measured at {measured} env{'s' if measured > 1 else ''} on Hopper, docs/speed.md): more "
+                "envs per process amortize its per-step transforms")
     if c.distributed == "ray":
         name = f"RayCollector({name} x {c.workers})"
     elif c.workers > 1:
