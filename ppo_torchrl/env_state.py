@@ -43,12 +43,15 @@ PACKED = "packed"
 
 
 class EnvState(Transform):
+    """The env-side state of the envs under one `TransformedEnv` (module doc); it changes nothing in the data but
+    the episode counters it writes."""
+
     def __init__(self, envs: List[ResumableReset], obs_norm: ObservationNormalizer,
                  reward_norm: Optional[RewardNormalizer] = None):
         super().__init__(in_keys=[], out_keys=list(EPISODE_KEYS))
         self.gym_envs = envs
         self.obs_norm, self.reward_norm = obs_norm, reward_norm
-        self.held_positions: Optional[list] = None  # restored, waiting for continue_episodes
+        self.held_positions: Optional[dict] = None  # {"envs", "acted_on"} restored, waiting for continue_episodes
 
     # ------------------------------------------------------------------ the episodes, in TorchRL's keys
     def episodes(self) -> tuple:
@@ -151,7 +154,7 @@ class EnvState(Transform):
 
     # ------------------------------------------------------------------ TorchRL's face of the state
     def get_extra_state(self) -> dict:
-        return {PACKED: pickle.dumps(self.snapshot())}
+        return pack(self.snapshot())
 
     def set_extra_state(self, state) -> None:
         snapshot = unpack(state)
@@ -160,7 +163,7 @@ class EnvState(Transform):
 
 
 def unpack(state) -> Optional[dict]:
-    """An EnvState's extra state as it comes back from anywhere (a TensorDict from a worker too) as a snapshot."""
+    """What `pack` made, as it comes back from anywhere (a TensorDict from a worker too); None if not packed."""
     if state is None:
         return None
     if hasattr(state, "to_dict"):
@@ -173,8 +176,11 @@ def unpack(state) -> Optional[dict]:
     return pickle.loads(packed)
 
 
-def pack(snapshot: dict) -> dict:
-    return {PACKED: pickle.dumps(snapshot)}
+def pack(state: dict) -> dict:
+    """A state as TorchRL's worker processes pass it best: one pickled `bytes` entry. They turn a state dict
+    into a TensorDict and send each tensor through shared memory, ~2 ms apiece and ~20 ms a round trip for a
+    dozen (RNG states and Python floats would not survive it); one `bytes` entry stays one plain message."""
+    return {PACKED: pickle.dumps(state)}
 
 
 def env_state_of(env) -> EnvState:

@@ -21,14 +21,12 @@ checkpoint a resume drops.
 
 from __future__ import annotations
 
-import pickle
 from pathlib import Path
 from typing import Optional
 
-from ppo_torchrl.env_state import EnvState, pack, unpack
+from ppo_torchrl.env_state import PACKED, EnvState, pack, unpack
 
-FAST = "packed"  # FastCollector's state travels as one pickled bytes entry (pickle_part)
-OWN = "fast"  # FastCollector's own entry in its state: the observation each env acts on next, the RNG
+OWN = "fast"  # FastCollector's own entry in its state: its exploration RNG
 
 
 def env_state_key(env) -> str:
@@ -55,22 +53,14 @@ def with_worker_parts(whole, parts: list):
     """`whole` (a collector state) with each part replaced, each in the form its part had (packed or not)."""
     old = whole if isinstance(whole, (list, tuple)) else \
         [whole[f"worker{i}"] for i in range(len(parts))] if "worker0" in whole else [whole]
-    parts = [pickle_part(p) if FAST in dict(o) else p for p, o in zip(parts, old)]
+    parts = [pack(p) if PACKED in dict(o) else p for p, o in zip(parts, old)]
     if isinstance(whole, (list, tuple)):
         return parts
     return {**whole, **{f"worker{i}": p for i, p in enumerate(parts)}} if "worker0" in whole else parts[0]
 
 
 def _open(part) -> dict:
-    part = dict(part)
-    return pickle.loads(part[FAST]) if FAST in part else part
-
-
-def pickle_part(state: dict) -> dict:
-    """A FastCollector state as TorchRL's worker processes pass it best: one pickled `bytes` entry. They turn
-    a state dict into a TensorDict and send each tensor through shared memory, ~2 ms apiece and ~20 ms a round
-    trip for a dozen; one `bytes` entry stays one plain message (~1 ms)."""
-    return {FAST: pickle.dumps(state)}
+    return unpack(part) or dict(part)  # FastCollector's is one pickled entry (env_state.pack)
 
 
 def env_snapshot(part: dict, key: str) -> Optional[dict]:
@@ -80,7 +70,7 @@ def env_snapshot(part: dict, key: str) -> Optional[dict]:
 
 def shared_part(part: dict, key: str, snapshot: dict) -> dict:
     """What a collector whose (opened) state is `part` loads between batches: EnvState's `snapshot` in place of
-    its own, and nothing of the collector's own state (OWN: FastCollector's next observations and RNG), so
+    its own, and nothing of the collector's own state (OWN: FastCollector's RNG), so
     each env goes on from where it is."""
     part = {k: v for k, v in part.items() if k != OWN}
     return {**part, "env_state_dict": {**dict(part["env_state_dict"]), key: pack(snapshot)}}

@@ -31,8 +31,7 @@ import torch
 from omegaconf import OmegaConf
 from tensordict import TensorDict
 
-from ppo_torchrl.collectors.choice import collector_class as collector_class_of
-from ppo_torchrl.collectors.choice import resolve_backend
+from ppo_torchrl.collectors.choice import collector_class as collector_class_of, resolve_backend
 from ppo_torchrl.internals import env_snapshot, env_state_key, shared_part, with_worker_parts, worker_parts
 from ppo_torchrl.collectors.multiprocess import (
     WorkerWatch,
@@ -53,9 +52,10 @@ BATCH_KEYS = ["observation", "action", ("next", "observation"), ("next", "reward
 class Collection:
     def __init__(self, cfg, ac, seed: int, device: torch.device):
         c = cfg.collector
-        self.fast = resolve_backend(cfg) == "fast"
+        backend = resolve_backend(cfg)
+        self.fast = backend == "fast"
         self.multi = c.workers > 1 or bool(c.distributed)
-        collector_class, steps = collector_class_of(resolve_backend(cfg))  # collectors/choice.py: the registered
+        collector_class, steps = collector_class_of(backend)  # the classes registered in collectors/choice.py
         policy = ac.actor if steps == "actor" else sampling_policy(ac)  # FastCollector reads the actor's net
         env_kwargs = dict(clip_actions=ac.head == "normal", gamma=cfg.advantage.gamma)
         common = dict(frames_per_batch=c.frames_per_batch, total_frames=-1, policy_device=device,
@@ -97,11 +97,9 @@ class Collection:
         try:
             if self.multi:
                 self.collector.update_policy_weights_()  # every worker collects with the weights of the last update
-                batch = next(self._iterator)
-                self._metrics = mean_metrics(self._merge_stats())  # over every env of every worker, once
-            else:
-                batch = next(self._iterator)
-                self._metrics = mean_metrics(self.state.env_metrics())
+            batch = next(self._iterator)
+            # the env metrics: over every env (of every worker), averaged once
+            self._metrics = mean_metrics(self._merge_stats() if self.multi else self.state.env_metrics())
         except Exception:
             self._raise_if_a_worker_died()
             raise

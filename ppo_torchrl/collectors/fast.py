@@ -22,8 +22,8 @@ from tensordict import TensorDict
 from torchrl.collectors import Collector
 from torchrl.envs import EnvBase
 
-from ppo_torchrl.internals import OWN, keep_counters, pickle_part, worker_parts
-from ppo_torchrl.env_state import env_state_of
+from ppo_torchrl.internals import OWN, keep_counters, worker_parts
+from ppo_torchrl.env_state import env_state_of, pack
 from ppo_torchrl.models import NumpyPolicy
 
 
@@ -143,12 +143,12 @@ class FastCollector(Collector):
     def state_dict(self):
         """TorchRL's (the env's EnvState: statistics, episodes, positions, the observation each env's policy acts
         on next) and this collector's own ("fast": the exploration RNG), packed in one entry
-        (internals.pickle_part). The policy's weights are left out: the learner holds them and sends them."""
+        (env_state.pack). The policy's weights are left out: the learner holds them and sends them."""
         self._current_obs()  # in the EnvState's snapshot below: the observation each policy acts on next
         state = super().state_dict()
         state.pop("policy_state_dict", None)
         state[OWN] = {"rng": self.rng.bit_generator.state}
-        return pickle_part(state)
+        return pack(state)
 
     def load_state_dict(self, state_dict, **kwargs) -> None:
         """A saved state (resume): the statistics and each env where it was; the merged statistics between
