@@ -6,7 +6,9 @@ TorchRL's collectors:
   env's transforms' state, `frames`, `iter`, ...); `MultiSyncCollector`: `{"worker0": <that>, "worker1": ...}`;
   `RayCollector`: a list of them. TorchRL has no accessor for one worker's env state, and the statistics of
   several workers are pooled between batches (collection.py), so the app reads and rewrites `EnvState`'s one
-  entry in each part (`worker_parts`, `env_snapshot`, `with_env_snapshot`, `with_worker_parts`).
+  entry in each part (`worker_parts`, `env_snapshot`, `shared_part`, `with_worker_parts`), found under the key
+  PyTorch gives a module's `get_extra_state` (`<module name>._extra_state`, `env_state_key`; asking
+  `state_dict()` for its keys instead fails on a lazy transform's uninitialized buffer, e.g. CatFrames').
 - `Collector.load_state_dict` sets `_frames` / `_iter` from the state it loads: a state pushed to a worker
   between batches carries the worker's own (`keep_counters`).
 - `MultiSyncCollector.procs`: the worker processes, whose sentinels `WorkerWatch` waits on (no accessor).
