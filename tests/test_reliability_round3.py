@@ -245,6 +245,35 @@ def test_a_killed_eval_process_is_restarted_and_the_run_finishes(tiny_cfg, tmp_p
     assert len(evals) == 4 and all(evals), evals  # every eval point has its eval, the one in flight at the kill too
 
 
+def test_a_dead_workers_line_survives_a_wait_that_swallows_it():
+    """TorchRL's weight-update ack wait catches any exception and logs it: the watch's error raised into it
+    by SIGUSR1 was lost, and the run ended on TorchRL's own error as an internal error (seen in CI). The
+    watch must give the line again to the collector's catch."""
+    import multiprocessing
+
+    from ppo_torchrl.collectors.multiprocess import WorkerWatch
+
+    worker = multiprocessing.get_context("fork").Process(target=time.sleep, args=(60,))
+    worker.start()
+    watch = WorkerWatch([worker])
+    try:
+        swallowed = []
+        os.kill(worker.pid, signal.SIGKILL)
+        deadline = time.time() + 60
+        while not swallowed and time.time() < deadline:
+            try:
+                time.sleep(0.05)  # a TorchRL wait: `except Exception` logs what it caught, then goes on
+            except Exception as error:  # noqa: BLE001
+                swallowed.append(str(error))
+        again = watch.error()
+    finally:
+        watch.stop()
+        worker.join(5)
+    expected = f"collector worker 0 (pid {worker.pid}) died (killed by SIGKILL)"
+    assert swallowed and expected in swallowed[0]
+    assert again is not None and expected in str(again)
+
+
 def test_a_killed_collector_worker_is_one_line_and_a_failed_status(tmp_path):
     run = tmp_path / "run"
     args = ["env=InvertedPendulum-v4", "collector.workers=2", "collector.frames_per_batch=256",

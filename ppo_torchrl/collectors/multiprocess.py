@@ -57,7 +57,9 @@ class WorkerWatch:
     batch cannot be used: nothing of theirs is saved; they ignore SIGTERM, see worker_env) and sends SIGUSR1
     to the main thread, whose handler raises the error: a signal ends any blocking call the main thread is
     in (a pipe, a queue, a lock), so no wait on a dead worker outlives it. TorchRL's own checks may see
-    the death first; `error()` is the same line either way, raised once. `stop()` before a shutdown."""
+    the death first, and a TorchRL wait may catch the handler's error and log it (its weight-update ack
+    wait does) before raising its own: `error()` gives the same line every time it is asked, so the
+    collector's catch names the worker whichever error reaches it. `stop()` before a shutdown."""
 
     def __init__(self, procs: list):
         self.procs = list(procs)
@@ -95,17 +97,17 @@ class WorkerWatch:
 
     def _interrupt(self, signum, frame) -> None:
         if self.dead is not None and not self._raised:
+            self._raised = True
             raise self.error()
 
     def error(self, timeout_s: float = 2.0) -> Exception:
-        """The one line for a dead worker (an EnvironmentFault), once; None if no worker has died."""
+        """The one line for a dead worker (an EnvironmentFault); None if no worker has died."""
         if self.dead is None:  # TorchRL saw it first: the sentinel wakes the thread at the same instant
             self._thread.join(timeout_s)
-        if self.dead is None or self._raised:
+        if self.dead is None:
             return None
         from ppo_torchrl.signals import ON_DISK
 
-        self._raised = True
         i, proc = self.dead
         proc.join(timeout_s)  # reaped, for its exit code
         code = proc.exitcode
