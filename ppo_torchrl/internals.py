@@ -28,7 +28,7 @@ from typing import Optional
 
 from ppo_torchrl.env_state import PACKED, EnvState, pack, unpack
 
-OWN = "fast"  # FastCollector's own entry in its state: its exploration RNG
+OWN = "fast"  # a collector's own entry in its state (its RNG); first FastCollector's, hence the name
 
 
 def env_state_key(env) -> str:

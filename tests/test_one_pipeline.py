@@ -35,12 +35,14 @@ def test_torchrls_multisync_collector_runs_the_fast_collector_as_its_collector_c
 
 
 @pytest.mark.parametrize("scale", [["collector.workers=2", "collector.num_envs=2"], ["collector.num_envs=4"],
-                                   ["collector.backend=torchrl", "collector.num_envs=4"]])
+                                   ["collector.backend=torchrl", "collector.num_envs=4"],
+                                   ["collector.backend=torchrl", "collector.workers=2", "collector.num_envs=2"]])
 def test_a_resume_collects_the_batch_the_uninterrupted_run_collects(tiny_cfg, scale):
     """One resume path (Collection.load_state_dict -> the collector's load_state_dict -> each EnvState's
-    snapshot): each env's position, the statistics, running returns and exploration RNG come back from the
-    checkpoint, the batch after a resume is the batch the uninterrupted run collects (the fast collector in
-    workers or in one process; TorchRL's Collector in one process, the torch RNG set as the trainer does)."""
+    snapshot and the collector's own RNG): each env's position, the statistics, running returns and
+    exploration RNG come back from the checkpoint, the batch after a resume is the batch the uninterrupted
+    run collects (each collector in workers or in one process; in one process the torch RNG also set as the
+    trainer does)."""
     cfg = tiny_cfg(*scale, "env.max_episode_steps=40")
     ac = make_actor_critic(cfg.policy, env_spec(cfg.env))
     first = make_collector(cfg, ac, 3, torch.device("cpu"))

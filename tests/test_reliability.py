@@ -29,10 +29,13 @@ def metric_rows(run_dir):
     return [[v for i, v in enumerate(line.split(",")) if i not in skip] for line in lines[1:]]
 
 
-@pytest.mark.parametrize("backend, envs, background", [("fast", 1, "false"), ("torchrl", 1, "false"),
-                                                       ("torchrl", 2, "false"), ("fast", 1, "true")])
-def test_interrupted_and_resumed_run_matches_an_uninterrupted_one(tiny_cfg, tmp_path, backend, envs, background):
+@pytest.mark.parametrize("backend, envs, background, workers", [
+    ("fast", 1, "false", 1), ("torchrl", 1, "false", 1), ("torchrl", 2, "false", 1), ("fast", 1, "true", 1),
+    ("torchrl", 1, "false", 2)])  # TorchRL's Collector in worker processes: each worker's torch RNG resumes too
+def test_interrupted_and_resumed_run_matches_an_uninterrupted_one(tiny_cfg, tmp_path, backend, envs, background,
+                                                                 workers):
     overrides = [*FOUR_ITERATIONS, f"collector.backend={backend}", f"collector.num_envs={envs}",
+                 f"collector.workers={workers}",
                  f"eval.background={background}"]  # true: an eval is under way when the signal comes
     Trainer(tiny_cfg(*overrides), tmp_path / "straight").train()
 

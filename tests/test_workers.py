@@ -82,12 +82,12 @@ def test_workers_collect_exact_on_policy_batches_and_share_one_set_of_stats(tiny
                 p.fill_(-30.0 if name.endswith("log_std") else 0.0)  # mean 0, std e^-30: every action ~0
         batch = collector.collect()
         assert batch["action"].abs().max() < 1e-6  # every worker drew with the learner's new weights
-        from ppo_torchrl.internals import env_snapshot
+        from ppo_torchrl.internals import OWN, env_snapshot
 
         mine = collector.state.snapshot(positions=False)  # the merged set, in the main process's EnvState
         _, workers = collector._worker_states()
-        # every worker's EnvState holds where each env is; FastCollector adds its own ("fast": its RNG)
-        assert all(("fast" in w) == (backend == "fast") for w in workers)
+        # every worker's EnvState holds where each env is; each collector adds its own RNG (internals.OWN)
+        assert all(set(w[OWN]) == ({"rng"} if backend == "fast" else {"torch_rng"}) for w in workers)
         assert len(workers) == 2
         for worker in workers:
             theirs = env_snapshot(worker, collector._key)

@@ -12,7 +12,7 @@ from ppo_torchrl.errors import ConfigError
 # collector.backend -> (module, class, the policy it steps: "actor" (it reads the actor's net, distribution and
 # bounds) or "sampling" (models.sampling_policy: the lean draw), the name the start line gives it)
 BACKENDS = {"fast": ("ppo_torchrl.collectors.fast", "FastCollector", "actor", "FastCollector"),
-            "torchrl": ("torchrl.collectors", "Collector", "sampling", "torchrl.Collector")}
+            "torchrl": ("ppo_torchrl.collectors.torchrl_path", "TorchRLCollector", "sampling", "torchrl.Collector")}
 CHOICES = ("auto", *BACKENDS)  # collector.backend
 # TorchRL's Collector against FastCollector, whole-process frames/s on Hopper-v4 by collector.num_envs
 # (benchmarks/speed.py --backends fast,torchrl --envs 1,8,16: results/speed/torchrl_path_2026-11-27.txt):

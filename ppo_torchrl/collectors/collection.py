@@ -9,16 +9,18 @@ state (statistics, episode counters, env metrics, positions) is the env's `EnvSt
   merged (`EnvState.merge`: exact pooled statistics, every env's metrics) into `self.state` (the
   main process's EnvState, never stepped) and loaded back into every worker (`EnvState.shared`), through
   the collectors' public `state_dict()` / `load_state_dict()` (their layout: internals.py);
-- state for resume: the collector's, which holds each EnvState's snapshot (positions included); one path
-  loads it for every collector and scale (TorchRL's Collector then restarts on the saved positions).
+- state for resume: the collector's, which holds each EnvState's snapshot (positions included) and the
+  collector's own RNG; one path loads it for every collector and scale, each collector putting its envs
+  back where they were (`EnvState.continue_episodes`).
 
 A new collector class touches two files: its own, and its line in `collectors/choice.py` (`BACKENDS`). The
 contract: a `torchrl.collectors.Collector` that TorchRL's multi-process and Ray collectors can build
 (`collector_class=`, their arguments); it steps the env of `envs.make_torchrl_env` through its EnvState
 (the statistics through `EnvState.obs_norm` / `reward_norm` when it bypasses the transforms, the episodes
 through Gymnasium's counters); its `state_dict()` holds the env's transforms' state (`env_state_dict`, as
-TorchRL's Collector's does), its own entries beside it, and its `load_state_dict()` takes one back, calling
-`EnvState.continue_episodes()` if it puts its envs back itself.
+TorchRL's Collector's does), its own entry beside it (internals.OWN: the RNG it samples with, dropped from the
+statistics pushed between batches), and its `load_state_dict()` takes a saved one back and calls
+`EnvState.continue_episodes()` (collectors/fast.py and collectors/torchrl_path.py are the two).
 """
 
 from __future__ import annotations
@@ -67,9 +69,7 @@ class Collection:
         self._key = env_state_key(self.env)
         self._watch: Optional[WorkerWatch] = None  # with worker processes: a death ends the run at once
         if not self.multi:
-            self._new_collector = functools.partial(collector_class, policy=policy,
-                                                    auto_register_policy_transforms=False, **common)
-            self.collector = self._new_collector(self.env)
+            self.collector = collector_class(self.env, policy=policy, auto_register_policy_transforms=False, **common)
             if self.fast:
                 self.collector.set_seed(seed)
         else:
@@ -193,19 +193,8 @@ class Collection:
                                   "state had one owner; resume it with that version, or start a new run from its "
                                   "weights and statistics with init_from=<its run dir>")
             self.collector.load_state_dict(state["collector"])  # each EnvState's snapshot, in every worker
-            self._continue_episodes()
         if self.multi:
             self._push()
-
-    def _continue_episodes(self) -> None:
-        """Positions loaded that the collector did not take (TorchRL's Collector in this process; FastCollector
-        puts its envs back itself, and workers' envs are theirs): a new Collector, whose first reset restores
-        each env's saved position and gives back the observation its policy was to act on (uncounted)."""
-        if not self.state.continue_episodes(now=False):
-            return
-        self.collector.shutdown(close_env=False)
-        self.collector = self._new_collector(self.env)
-        self._iterator = iter(self.collector)
 
     def close(self) -> None:
         if self._watch is not None:
