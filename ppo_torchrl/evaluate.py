@@ -168,7 +168,7 @@ def summarize(cfg, episodes: dict) -> dict:
     result["outcomes"] = [  # one per episode, in order
         {"seed": seed, "length": n, "return": r, "terminated": stop, "termination": why,
          **({"crossed": bool(b), "success": bool(b and not stop)} if beyond is not None else {}),
-         **({key: gaits[i][key] for key in EPISODE_FOOT_KEYS} if gaits else {})}
+         **({key: gaits[i][key] for key in (*EPISODE_FOOT_KEYS, *EPISODE_TORQUE_KEYS)} if gaits else {})}
         for i, (seed, n, r, stop, why) in enumerate(zip(episodes["seeds"], lengths, returns, terminated, ends))
         for b in [beyond[i] if beyond is not None else None]]
     return result
@@ -185,8 +185,12 @@ PAIR_KEYS = tuple(f"{kind}_pairs_together" for kind in FOOT_PAIRS)
 # Per foot in each episode's outcome (eval.json) and row (height_sweep_episodes.csv): a worst case over the eval
 # (longest_air_moving_s) shows whether one episode or every one holds a foot up.
 EPISODE_FOOT_KEYS = ("foot_contact_share", "touchdown_frequency", "longest_air_moving_s")
+# Per episode too, a robot read from its model (env=legged): the largest |joint torque| / the model's own limit and
+# the share of time a joint was at its limit (robots/gait.py); over the eval, the max and the pooled share.
+EPISODE_TORQUE_KEYS = ("peak_torque_share", "torque_at_limit_share")
 GAIT_KEYS = ("stride_frequency", "duty_factor", "peak_joint_speed", "over_speed_limit_share", "body_contact_share",
-             "feet", "foot_contact_share", "touchdown_frequency", "longest_air_s", "longest_air_moving_s", *PAIR_KEYS)
+             "feet", "foot_contact_share", "touchdown_frequency", "longest_air_s", "longest_air_moving_s", *PAIR_KEYS,
+             *EPISODE_TORQUE_KEYS)
 
 
 def gait_figures(gaits: list, speed_limit: Optional[float]) -> dict:
@@ -204,6 +208,11 @@ def gait_figures(gaits: list, speed_limit: Optional[float]) -> dict:
         together = sum(g["pair_together_time_s"][kind] for g in gaits)
         figures[f"{kind}_pairs_together"] = float(together / down) if down > 0 else None
     figures["peak_joint_speed"] = float(max(g["peak_joint_speed"] for g in gaits))
+    figures["peak_torque_share"] = figures["torque_at_limit_share"] = None  # None: the model's limits not known
+    if gaits[0]["peak_torque_share"] is not None:
+        figures["peak_torque_share"] = float(max(g["peak_torque_share"] for g in gaits))
+        at_limit = sum(g["torque_at_limit_share"] * g["time_s"] for g in gaits)
+        figures["torque_at_limit_share"] = float(at_limit / max(sum(g["time_s"] for g in gaits), 1e-9))
     if speed_limit is not None:
         figures["joint_speed_limit"] = float(speed_limit)
         over = sum(g["over_speed_limit_time_s"] for g in gaits)
@@ -242,7 +251,9 @@ def motion_line(result: dict) -> str:
                  if "joint_speed_limit" in result else "")
         lines.append(f"gait: stride frequency {result['stride_frequency']:.1f} Hz, duty factor "
                      f"{result['duty_factor']:.2f}, peak joint speed {result['peak_joint_speed']:.1f} rad/s{limit}, "
-                     f"a non-foot body on the ground {result['body_contact_share']:.0%} of the time")
+                     f"a non-foot body on the ground {result['body_contact_share']:.0%} of the time"
+                     + (f", joint torque up to {result['peak_torque_share']:.0%} of the model's limit (at it "
+                        f"{result['torque_at_limit_share']:.1%} of the time)" if result.get("peak_torque_share") is not None else ""))
         if result["feet"]:
             feet = zip(result["feet"], result["foot_contact_share"], result["touchdown_frequency"],
                        result["longest_air_s"], result["longest_air_moving_s"])

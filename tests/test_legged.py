@@ -91,6 +91,28 @@ def test_each_robot_stands_for_two_seconds_at_its_derived_pose_under_its_derived
 
 
 @needs_robots
+def test_eval_measures_joint_torque_against_the_models_own_limits():
+    """Standing (action 0) a Go1's servos hold well under their force range; driven to the ends of the action
+    range they saturate: the peak share reaches 1.0 (the model's limit, not more) and the time at it shows."""
+    from ppo_torchrl.compose import compose
+    from ppo_torchrl.envs import make_gym_env
+
+    cfg = compose(["env=legged", f"env.xml_file={scene('unitree_go1')}", "env.locomotion.reset_noise_scale=0"])
+    robot = make_gym_env(cfg.env).unwrapped
+    robot.measure_gait = True
+    figures = {}
+    for name, action in (("standing", np.zeros(robot.model.nu)), ("driven", np.tile([1.0, -1.0, 1.0], 4))):
+        robot.reset(seed=0)
+        for _ in range(int(round(0.5 / robot.dt))):
+            robot.step(action)
+        figures[name] = robot.gait_summary()
+    assert 0.0 < figures["standing"]["peak_torque_share"] < 0.9
+    assert figures["standing"]["torque_at_limit_share"] == 0.0
+    assert figures["driven"]["peak_torque_share"] == pytest.approx(1.0, abs=1e-6)
+    assert figures["driven"]["torque_at_limit_share"] > 0.0
+
+
+@needs_robots
 def test_torque_motors_become_pd_servos_around_the_standing_pose_with_gains_from_the_model():
     """Go2's torque motors: kp = peak torque / 0.3 rad, kd = 2 sqrt(kp I); used as Menagerie ships them (its
     keyframe's ctrl, angles, sent as torques) the robot collapses to 0.077 m (the robots' README)."""
@@ -244,6 +266,8 @@ def test_a_legged_run_is_named_by_its_model_and_says_what_was_read(tmp_path):
     assert plain.returncode == 0, plain.stderr
     result = json.loads((runs[0] / "eval" / "eval.json").read_text())
     assert result["step_height_mean"] == pytest.approx(0.075)  # no argument: the step of 0.25 l
+    assert 0.0 < result["peak_torque_share"] <= 1.0 + 1e-9 and 0.0 <= result["torque_at_limit_share"] <= 1.0
+    assert all(0.0 < o["peak_torque_share"] <= 1.0 + 1e-9 for o in result["outcomes"])  # each episode's own
     sweep = subprocess.run(evaluate + ["heights=0,0.25l,0.3l"], cwd=tmp_path, capture_output=True, text=True, timeout=600)
     assert sweep.returncode == 0, sweep.stderr
     rows = list(csv.DictReader(open(runs[0] / "eval" / "height_sweep.csv")))

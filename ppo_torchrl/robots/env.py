@@ -140,6 +140,9 @@ class LocomotionEnv(StepTerrain, FootContacts, LeggedRewards, AntEnv):
             raise ConfigError("env.locomotion.joint_speed_limit_cost_weight needs env.locomotion.joint_speed_limit")
         self._speed_limit = legged.get("joint_speed_limit")
         self._step_peak = np.zeros(len(self._act_dofs))  # each actuated joint's top |speed| in the last control step
+        # a robot read from its model: each actuated joint's torque limit, the model's own (eval's torque figures)
+        self._torque_limit = None if self._robot is None else \
+            np.array([min(t, 1e30) for t in self._robot.peak_torque], np.float64)
         self._target_speed = legged.get("target_speed")
         self._positive_only = bool(legged.get("only_positive_rewards"))
         self._z_above_terrain = bool(legged.get("healthy_z_above_terrain"))
@@ -345,8 +348,10 @@ class LocomotionEnv(StepTerrain, FootContacts, LeggedRewards, AntEnv):
             np.maximum(peak, speeds, out=peak)
             if self.measure_gait:
                 feet, body = self._contacts()
+                torque = None if self._torque_limit is None else \
+                    float((np.abs(data.qfrc_actuator[self._act_dofs]) / self._torque_limit).max())
                 self.gait.add(feet, float(speeds.max()) if len(speeds) else 0.0, body > 0, model.opt.timestep,
-                              self._moving)
+                              self._moving, torque)
         self._step_peak = peak
         mujoco.mj_rnePostConstraint(model, data)
 

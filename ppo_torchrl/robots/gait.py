@@ -2,8 +2,9 @@
 physics step: stride frequency, duty factor, each foot's share of time on the ground, touchdowns per
 second and longest time in the air (also counting only the time the robot moved forward, its previous
 control step at MOVING_SPEED or more), for four feet at four corners the share of time both feet of a
-pair are down (diagonal, same side, same end: a trot, a pace, a bound), peak joint speed and torque,
-and the share of time a non-foot body touches the ground.
+pair are down (diagonal, same side, same end: a trot, a pace, a bound), peak joint speed, the joint
+torques against the model's own limits (the largest share of its limit any joint reached, and the share of
+time some joint was at it), and the share of time a non-foot body touches the ground.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import numpy as np
 
 MIN_AIR_S = 0.02  # a touchdown counts after at least this long in the air (contact chatter is not a stride)
 MOVING_SPEED = 0.1  # m/s: the robot moves when its last control step went forward at least this fast
+AT_LIMIT = 0.99  # a joint torque at this share of its limit or more is at the limit
 CORNERS = ("LF", "RF", "LH", "RH")  # a four-footed robot's feet: left/right, fore/hind
 # the foot pairs whose time down together tells the gaits apart (a trot, a pace, a bound)
 FOOT_PAIRS = {"diagonal": (("LF", "RH"), ("RF", "LH")), "same_side": (("LF", "LH"), ("RF", "RH")),
@@ -46,11 +48,15 @@ class GaitMeter:
         self.previous = None
         self.peak_joint_speed = 0.0
         self.over_limit_time = 0.0
+        self.peak_torque_share = None  # None: no torque limits known (a model not read by robots/model.py)
+        self.torque_at_limit_time = 0.0
         self.body_contact_time = 0.0
         self.pair_together_time = np.zeros(len(self._first))  # both feet of the pair down
         self.pair_down_time = np.zeros(len(self._first))  # at least one of them down
 
-    def add(self, feet: np.ndarray, joint_speed: float, body_contact: bool, dt: float, moving: bool = True) -> None:
+    def add(self, feet: np.ndarray, joint_speed: float, body_contact: bool, dt: float, moving: bool = True,
+            torque_share: Optional[float] = None) -> None:
+        """torque_share: the largest |joint torque| / the model's limit over the actuated joints this step."""
         if self.previous is not None:
             self.touchdowns += feet & ~self.previous & (self.air_time >= MIN_AIR_S)
         self.air_time = np.where(feet, 0.0, self.air_time + dt)
@@ -68,6 +74,9 @@ class GaitMeter:
         if self.speed_limit is not None and joint_speed > self.speed_limit:
             self.over_limit_time += dt
         self.body_contact_time += dt * body_contact
+        if torque_share is not None:
+            self.peak_torque_share = max(self.peak_torque_share or 0.0, torque_share)
+            self.torque_at_limit_time += dt * (torque_share >= AT_LIMIT)
 
     def summary(self) -> dict:
         t = max(self.time, 1e-9)
@@ -89,5 +98,9 @@ class GaitMeter:
             "time_s": float(self.time),
             "over_speed_limit_time_s": float(self.over_limit_time),  # an actuated joint over joint_speed_limit
             "body_contact_share": float(self.body_contact_time / t),  # share of time a non-foot body touches ground
+            # the largest |joint torque| / the model's limit (1.0: a servo saturated), the share of time a joint was
+            # at AT_LIMIT of it or more; None where the limits are not known
+            "peak_torque_share": self.peak_torque_share,
+            "torque_at_limit_share": None if self.peak_torque_share is None else float(self.torque_at_limit_time / t),
         }
 
