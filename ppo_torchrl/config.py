@@ -149,7 +149,9 @@ class LeggedConfig:
     belongs to one robot."""
 
     keyframe: Optional[str] = None  # the standing pose: this keyframe, else the model's 'home', else qpos0
-    action_scale: float = 0.5  # rad: each joint's target is its standing angle + action_scale x action (in [-1, 1])
+    # rad: each joint's target is its standing angle + action_scale x action (in [-1, 1]), or + its servo's
+    # saturation angle (peak torque / kp, from the model) x action where that is smaller
+    action_scale: float = 0.5
     control_dt: float = 0.02  # s: the policy acts every control_dt (frame_skip = control_dt / the model's timestep)
     target_speed: float = 0.35  # x sqrt(g l): the forward reward counts speed up to this
     forward_reward_weight: float = 3.5  # per sqrt(g l) of forward speed

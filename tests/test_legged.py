@@ -91,6 +91,24 @@ def test_each_robot_stands_for_two_seconds_at_its_derived_pose_under_its_derived
 
 
 @needs_robots
+def test_a_full_action_moves_a_joint_no_further_than_its_servo_saturates():
+    """env.legged.action_scale (0.5 rad) is the most; a servo that reaches its peak torque sooner (peak / kp, from
+    the model) gets that angle: Go1 23.7 / 100 (hips) and 35.55 / 100 (knees), ANYmal B 40 / 100, Go2's torque
+    motors their derived PD's 0.3 rad."""
+    from ppo_torchrl.compose import compose
+    from ppo_torchrl.envs import make_gym_env
+
+    expected = {"unitree_go1": [0.237, 0.237, 0.3555] * 4, "anybotics_anymal_b": [0.4] * 12, "unitree_go2": [0.3] * 12}
+    for folder, scales in expected.items():
+        robot = make_gym_env(compose(["env=legged", f"env.xml_file={scene(folder)}"]).env).unwrapped
+        assert robot._ctrl_per_action == pytest.approx(scales), folder
+        assert (robot.ctrl_of(np.ones(12)) - robot.ctrl_of(np.zeros(12)) <= np.array(scales) + 1e-9).all()
+    robot = make_gym_env(compose(["env=legged", f"env.xml_file={scene('unitree_go1')}",
+                                  "env.legged.action_scale=0.1"]).env).unwrapped
+    assert robot._ctrl_per_action == pytest.approx([0.1] * 12)  # the most, where the servos saturate later
+
+
+@needs_robots
 def test_eval_measures_joint_torque_against_the_models_own_limits():
     """Standing (action 0) a Go1's servos hold well under their force range; driven to the ends of the action
     range they saturate: the peak share reaches 1.0 (the model's limit, not more) and the time at it shows."""
@@ -130,7 +148,7 @@ def test_torque_motors_become_pd_servos_around_the_standing_pose_with_gains_from
     assert env.model.actuator_biastype[a] == mujoco.mjtBias.mjBIAS_AFFINE
     assert env.model.actuator_forcerange[a].tolist() == pytest.approx([-45.43, 45.43])
     assert env.ctrl_of(np.zeros(12))[a] == pytest.approx(-1.8)
-    assert env.ctrl_of(np.ones(12))[a] == pytest.approx(-1.3)
+    assert env.ctrl_of(np.ones(12))[a] == pytest.approx(-1.8 + PD_SATURATION_RAD)  # a full action: where it saturates
 
 
 @needs_robots

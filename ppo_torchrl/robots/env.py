@@ -5,7 +5,8 @@ configured (so a config without these keys steps exactly as Ant-v5 does):
 
 - **A robot read from its model** (env=legged; robots/model.py): the standing pose from its keyframe,
   its feet, heading and drives; each action is a joint-angle offset from the standing pose
-  (target = standing angle + action_scale x action, action in [-1, 1]) sent to the position servos
+  (target = standing angle + scale x action, action in [-1, 1]; scale: env.legged.action_scale, or the
+  servo's saturation angle, its peak torque / kp, where that is smaller) sent to the position servos
   as the model has them, torque motors being made PD servos first; the step added to the model at
   build time (robots/terrain.py).
 - **Heading** (`env.locomotion.heading`): the forward reward and eval's forward velocity are the main
@@ -278,7 +279,7 @@ class LocomotionEnv(StepTerrain, FootContacts, LeggedRewards, AntEnv):
         self.init_qpos = np.array(robot.qpos)
         gear = np.array(robot.gear)
         self._home_ctrl = gear * np.array(robot.home_angle)
-        self._ctrl_per_action = gear * action_scale
+        self._ctrl_per_action = gear * np.array(robot.action_scales(action_scale))
         limited = model.actuator_ctrllimited.astype(bool)
         self._ctrl_low = np.where(limited, model.actuator_ctrlrange[:, 0], -np.inf)
         self._ctrl_high = np.where(limited, model.actuator_ctrlrange[:, 1], np.inf)
@@ -286,7 +287,8 @@ class LocomotionEnv(StepTerrain, FootContacts, LeggedRewards, AntEnv):
 
     def ctrl_of(self, action) -> np.ndarray:
         """The control the simulator gets for an action: as it is, or with a robot read from its model, each
-        joint's target angle (standing angle + action_scale x action) within the actuator's range."""
+        joint's target angle (standing angle + its scale x action, Robot.action_scales) within the actuator's
+        range."""
         if self._robot is None:
             return action
         return np.clip(self._home_ctrl + self._ctrl_per_action * np.asarray(action, np.float64),

@@ -17,6 +17,8 @@ derived from the MJCF and nothing else.
   motor saturates at that angle error; Menagerie's position servos saturate at 0.24-0.4 rad), kd =
   2 sqrt(kp I), critical damping of the joint's own inertia I at the standing pose (the mass matrix's
   diagonal, armature included); the force range is the motor's.
+- **Action scale**: a full action moves each joint's target by env.legged.action_scale, or by its servo's
+  saturation angle (peak torque / kp) where that is smaller (`Robot.action_scales`).
 - **Size**: leg length l, thigh plus shank (hip-flexion joint to knee joint to foot centre, whatever
   the pose), the mean over the legs; mass, the sum of the robot's bodies.
 
@@ -70,6 +72,12 @@ class Robot:
     home_angle: tuple  # each actuator's joint angle at the standing pose (rad)
     gear: tuple
     timestep: float  # s, the model's physics step
+
+    def action_scales(self, most: float) -> tuple:
+        """Per actuator, the angle (rad) a full action moves its joint's target from the standing pose: `most`
+        (env.legged.action_scale), or less where the servo saturates sooner, at its peak torque / kp (a larger
+        offset asks for torque the drive does not have: the same bang-bang, only harder to learn)."""
+        return tuple(min(most, peak / kp) if kp > 0 else most for peak, kp in zip(self.peak_torque, self.kp))
 
     @property
     def speed_scale(self) -> float:
@@ -233,9 +241,10 @@ def _read_robot(path: str, keyframe: Optional[str]) -> Robot:
     kp, kd, peak = [], [], []
     for a, j in enumerate(joints):
         peak.append(_peak_torque(model, a, drive[a]))
-        if drive[a] == "position":
-            kp.append(float(model.actuator_gainprm[a, 0]))
-            kd.append(abs(float(model.actuator_biasprm[a, 2])))
+        if drive[a] == "position":  # on length gear x q: joint gains are the actuator's x gear^2
+            gear2 = float(model.actuator_gear[a, 0]) ** 2
+            kp.append(float(model.actuator_gainprm[a, 0]) * gear2)
+            kd.append(abs(float(model.actuator_biasprm[a, 2])) * gear2)
         else:
             if not math.isfinite(peak[-1]):
                 raise ConfigError(f"{where}: torque motor '{model.actuator(a).name or a}' has no torque limit "

@@ -74,9 +74,12 @@ def describe(robot: Robot, legged) -> str:
     values = derived_values(robot, legged)
     loco, terrain = values["locomotion"], values["terrain"]
     clock = f", trot clock {loco['gait_period']:.2f} s" if loco["gait_period"] else ""
+    scales = robot.action_scales(legged.action_scale)
+    reach = f"{min(scales):.2f}" + (f"-{max(scales):.2f}" if max(scales) > min(scales) else "")
     return (f"{robot.describe()}; recipe: step {terrain['eval_step_height'] * 100:.1f} cm (0.25 l), speed up to "
-            f"{loco['target_speed']:.2f} m/s, fall under {loco['healthy_z_range'][0] * 100:.1f} cm, control every "
-            f"{loco['frame_skip'] * robot.timestep * 1000:g} ms{clock}").replace("(0.25 l)", f"({legged.step_height:g} l)")
+            f"{loco['target_speed']:.2f} m/s, fall under {loco['healthy_z_range'][0] * 100:.1f} cm, actions move "
+            f"joints up to {reach} rad, control every {loco['frame_skip'] * robot.timestep * 1000:g} ms{clock}"
+            ).replace("(0.25 l)", f"({legged.step_height:g} l)")
 
 
 def scaled_env(env_cfg, robot: Robot):
