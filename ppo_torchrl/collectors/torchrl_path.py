@@ -20,7 +20,9 @@ from ppo_torchrl.internals import OWN
 class TorchRLCollector(Collector):
     def state_dict(self):
         state = super().state_dict()
-        state[OWN] = {"torch_rng": torch.get_rng_state()}
+        # bytes, not a tensor: a worker's state comes back every batch (the statistics' merge), and a tensor would
+        # travel through shared memory (env_state.pack says what that costs); its RNG only matters on resume
+        state[OWN] = {"torch_rng": torch.get_rng_state().numpy().tobytes()}
         return state
 
     def load_state_dict(self, state_dict, **kwargs) -> None:
@@ -30,4 +32,4 @@ class TorchRLCollector(Collector):
         if own is not None:
             if env_state_of(self.env).continue_episodes(now=False):
                 self.reset()  # each env back where it was (its reset takes the held position)
-            torch.set_rng_state(own["torch_rng"])
+            torch.set_rng_state(torch.frombuffer(bytearray(own["torch_rng"]), dtype=torch.uint8))
