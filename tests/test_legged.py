@@ -292,3 +292,28 @@ def test_a_legged_run_is_named_by_its_model_and_says_what_was_read(tmp_path):
     assert [float(r["step_height_m"]) for r in rows] == pytest.approx([0.0, 0.075, 0.09])
     refused = run_app("env=legged", f"env.xml_file={model}", "env.locomotion.target_speed=1.0", cwd=tmp_path)
     assert refused.returncode == 2 and "env.legged.target_speed" in refused.stderr, refused.stderr
+
+
+@needs_robots
+def test_a_filmed_robot_whose_visual_meshes_were_left_out_is_drawn():
+    """The shared Menagerie robots keep their collision geoms in group 3, which MuJoCo does not draw: a video of
+    one showed an empty floor. A rendered env draws them (in its own copy: a training env keeps the model's
+    groups), and the frame has the robot in it: grey pixels that are not there when its geoms stay hidden."""
+    from ppo_torchrl.compose import compose
+    from ppo_torchrl.envs import make_gym_env
+
+    cfg = compose(["env=legged", f"env.xml_file={scene('unitree_go1')}", "env.locomotion.reset_noise_scale=0"])
+    plain = make_gym_env(cfg.env).unwrapped.model
+    robot_geoms = plain.body_rootid[plain.geom_bodyid] == plain.body("trunk").id
+    assert (plain.geom_group[robot_geoms] == 3).all()  # as written: nothing of the robot drawn
+    filmed = make_gym_env(cfg.env, render_mode="rgb_array", width=96, height=72)
+    model = filmed.unwrapped.model
+    assert (model.geom_group[robot_geoms] == 0).all() and model.ngeom == plain.ngeom
+    assert (model.geom_contype == plain.geom_contype).all() and (model.geom_size == plain.geom_size).all()
+    filmed.reset(seed=0)
+    frame = filmed.render().astype(int)
+    grey = (np.abs(frame - frame.mean(axis=2, keepdims=True)).max(axis=2) < 12) & (frame.mean(axis=2) > 90)
+    model.geom_group[robot_geoms] = 3  # hidden again: the same frame without the robot
+    hidden = filmed.render().astype(int)
+    grey_hidden = (np.abs(hidden - hidden.mean(axis=2, keepdims=True)).max(axis=2) < 12) & (hidden.mean(axis=2) > 90)
+    assert grey.sum() > 100 and grey_hidden.sum() < grey.sum() / 10, (grey.sum(), grey_hidden.sum())

@@ -33,6 +33,9 @@ configured (so a config without these keys steps exactly as Ant-v5 does):
   clock's phase (sin, cos).
 - **Gait bookkeeping** for eval (`measure_gait = True`; robots/gait.py), sampled every physics step.
 - **Tracking camera**: a rendered model without a camera named `track` gets one on its main body.
+- **A robot to film**: MuJoCo draws geom groups 0-2 only, and models whose visual meshes were left out
+  (Menagerie's keep collision geoms in group 3) would film an empty floor: a rendered env whose robot has
+  no drawn geom draws its group-3 geoms (in the rendered copy only; a geom's group changes no physics).
 """
 
 from __future__ import annotations
@@ -90,6 +93,29 @@ def heading_angle(heading) -> Optional[float]:
 
 
 
+
+DRAWN_GROUPS = 3  # MuJoCo's default visual options draw geom groups 0, 1 and 2
+HIDDEN_GROUP = 3  # where MuJoCo Menagerie's models keep their collision geoms
+
+
+def draw_hidden_robot(spec) -> bool:
+    """Moves the robot's group-3 geoms into group 0 when none of its geoms (those of a body under a free
+    joint) is drawn (groups 0-2, not transparent), as in a model whose visual meshes were left out; True
+    if it did. Only for a rendered copy of the model: the group is a drawing choice, no contact or force
+    reads it. (spec.bodies lists the bodies in the compiled model's order, the world first.)"""
+    plain = spec.compile()
+    free_roots = {plain.jnt_bodyid[j] for j in range(plain.njnt) if plain.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE}
+    on_robot = np.isin(plain.body_rootid, list(free_roots))  # per body
+    robot_geoms = on_robot[plain.geom_bodyid]
+    drawn = robot_geoms & (plain.geom_group < DRAWN_GROUPS) & (plain.geom_rgba[:, 3] > 0)
+    if drawn.any():
+        return False
+    hidden = [g for body, robot in zip(spec.bodies, on_robot) if robot for g in body.geoms if g.group == HIDDEN_GROUP]
+    for geom in hidden:
+        geom.group = 0
+    return bool(hidden)
+
+
 class LocomotionEnv(StepTerrain, FootContacts, LeggedRewards, AntEnv):
     """Ant-v5 over any MJCF model, plus a robot read from its model, heading, actuation limits, reward terms,
     terrain and gait (module doc)."""
@@ -105,6 +131,7 @@ class LocomotionEnv(StepTerrain, FootContacts, LeggedRewards, AntEnv):
         legged, terrain = dict(legged or {}), dict(terrain or {})
         self._legged, self._terrain_cfg, self._evaluation = legged, terrain, evaluation
         self._add_track_camera = False
+        self._draw_collision_geoms = ant_kwargs.get("render_mode") is not None
         self._robot: Optional[Robot] = None if robot is None else read_robot(xml_file, robot.get("keyframe"))
         self._step_to_add = self._step_needed(xml_file, terrain) if self._robot is not None else None
         if ant_kwargs.get("render_mode") is not None and "camera_name" not in ant_kwargs and "camera_id" not in ant_kwargs:
@@ -165,11 +192,13 @@ class LocomotionEnv(StepTerrain, FootContacts, LeggedRewards, AntEnv):
 
     # -- model set-up --------------------------------------------------------------------------------
     def _initialize_simulation(self):
-        if not (self._add_track_camera or self._step_to_add):
+        if not (self._add_track_camera or self._step_to_add or self._draw_collision_geoms):
             return super()._initialize_simulation()
         spec = mujoco.MjSpec.from_file(self.fullpath)  # the model file is read, never written
         if self._step_to_add:
             add_step(spec, *self._step_to_add)
+        if self._draw_collision_geoms:
+            self._draw_collision_geoms = draw_hidden_robot(spec)
         if self._add_track_camera:
             self._add_track_camera = self._place_camera(spec)
         model = spec.compile()
