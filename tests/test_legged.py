@@ -317,3 +317,16 @@ def test_a_filmed_robot_whose_visual_meshes_were_left_out_is_drawn():
     hidden = filmed.render().astype(int)
     grey_hidden = (np.abs(hidden - hidden.mean(axis=2, keepdims=True)).max(axis=2) < 12) & (hidden.mean(axis=2) > 90)
     assert grey.sum() > 100 and grey_hidden.sum() < grey.sum() / 10, (grey.sum(), grey_hidden.sum())
+
+
+@needs_robots
+def test_unnamed_feet_go_by_their_corner_in_evals():
+    """ANYmal B's and A1's foot spheres have no name: the gait line and the sweep's columns call them by their
+    corner (they said 'foot 0'..'foot 3'); named feet keep their names."""
+    from ppo_torchrl.compose import compose
+    from ppo_torchrl.envs import make_gym_env
+
+    for folder, names in (("anybotics_anymal_b", None), ("unitree_a1", None), ("unitree_go1", ["FL", "FR", "RL", "RR"])):
+        robot = make_gym_env(compose(["env=legged", f"env.xml_file={scene(folder)}"]).env).unwrapped
+        assert robot.foot_names == (names or robot.foot_corners), folder
+        assert sorted(robot.foot_corners) == ["LF", "LH", "RF", "RH"]

@@ -53,8 +53,10 @@ class FootContacts:
         self._kinds = self._kind.tolist()  # the per-step lookups, without arrays
         self._foot_of = {geom: i for i, geom in enumerate(self.feet.tolist())}  # a foot geom's place in self.feet
         self._forces = np.empty_like(self.data.cfrc_ext)  # contact_cost's buffer
-        self.foot_names = [model.geom(g).name or f"foot {i}" for i, g in enumerate(self.feet)]
         self.foot_corners = self._corners()
+        # an unnamed foot geom (ANYmal B's, A1's) goes by its corner, else by its place
+        self.foot_names = [model.geom(g).name or (self.foot_corners[i] if self.foot_corners else f"foot {i}")
+                           for i, g in enumerate(self.feet)]
 
     def _corners(self) -> Optional[list]:
         """Each foot's corner (CORNERS: left or right of the feet's centre, ahead of it along the heading or

@@ -1,0 +1,112 @@
+"""The real robots' table (issue 46): one row per robot read from its model, from each robot's height sweep
+(`python -m ppo_torchrl.evaluate run=<robot dir> checkpoint=last episodes=100 seed=<s> heights=0,0.2l,0.25l,0.3l
+out=<robot dir>/<sweep>`), and each goal of issue 46 item 5 met or missed, robot by robot.
+
+    python benchmarks/robots_table.py <robot dir>[:<sweep dir>] [...] [--sweep sweep] [--goal go1=0.9 ...] [--out table.md]
+
+<sweep dir> defaults to <robot dir>/<--sweep>. The robot (name, mass, leg length l, feet by corner) is read
+again from the model file the run trained on (its .hydra/config.yaml), so the figures are per corner: LF RF LH
+RH. Success is issue 31's (crossed and not terminated). Goals: a step of 0.25 l crossed by >= the robot's
+--goal (default 0.8; 0.9 for the tuning robots Go1 and ANYmal B); flat ground >= 95% at >= 0.25 sqrt(g l);
+each foot on the ground 35-65% of the time, no foot up > 0.5 s while moving, strides under 3 Hz (flat and
+0.25 l); the joint torques: the largest share of the model's limit and the time some joint is at it.
+"""
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+from omegaconf import OmegaConf
+from robot_row import SHARE, STRIDE_HZ, SWING_S, load, long_swings
+
+from ppo_torchrl.robots.model import GRAVITY, read_robot
+
+FLAT_GOAL, SPEED_GOAL, STEP = 0.95, 0.25, 0.25  # flat success, flat speed in sqrt(g l), the step in l
+TUNING_GOAL = {"go1": 0.9, "anymal_b": 0.9}
+
+
+def robot_of(run_dir: Path):
+    cfg = OmegaConf.load(run_dir / ".hydra" / "config.yaml")
+    return read_robot(cfg.env.xml_file, cfg.env.legged.keyframe)
+
+
+def in_legs(sweep: dict, l: float) -> dict:
+    """{height in l (3 decimals): that height's result}."""
+    return {round(h / l, 3): r for h, r in sweep.items()}
+
+
+def by_corner(robot, values) -> str:
+    order = sorted(range(4), key=lambda i: ("LF", "RF", "LH", "RH").index(robot.corners[i]))
+    return " ".join(f"{values[i]:.2f}" for i in order)
+
+
+def rows(entries: list, goals: dict) -> str:
+    head = ("| robot | mass | l | 0.25 l | success per height (100 episodes each unless said) | flat speed "
+            "| each foot on the ground LF RF LH RH: flat; 0.25 l | episodes with a foot up > 0.5 s moving: flat; 0.25 l "
+            "| most touchdowns/s | joint torque: peak share of the limit, time at it |")
+    out = [head, "|---|---|---|---|---|---|---|---|---|---|"]
+    verdicts = []
+    for name, robot, sweep in entries:
+        l = robot.leg_length
+        heights = in_legs(sweep, l)
+        flat, step = heights.get(0.0), heights.get(STEP)
+        n = sorted({len(r["outcomes"]) for r in heights.values()})
+        success = ", ".join(f"{h:g} l {r['success_rate']:.0%}" for h, r in sorted(heights.items()))
+        if n != [100]:
+            success += f" ({'/'.join(map(str, n))} episodes)"
+        scale = math.sqrt(GRAVITY * l)
+        speed = (f"{flat['forward_velocity_mean']:.2f} m/s ({flat['forward_velocity_mean'] / scale:.2f} sqrt(g l))"
+                 if flat else "-")
+        shown = [r for r in (flat, step) if r]
+        shares = "; ".join(by_corner(robot, r["foot_contact_share"]) for r in shown)
+        swings = "; ".join(f"{long_swings(r)[0]:.0%}" for r in shown)
+        stride = max(max(r["touchdown_frequency"]) for r in shown)
+        torque = ", ".join(f"{r['peak_torque_share']:.2f} / {r['torque_at_limit_share']:.0%}" for r in shown)
+        out.append(f"| {name} | {robot.mass:.1f} kg | {l:.3f} m | {STEP * l * 100:.1f} cm | {success} | {speed} "
+                   f"| {shares} | {swings} | {stride:.1f} | {torque} |")
+        goal = goals.get(name, TUNING_GOAL.get(name, 0.8))
+        checks = [
+            (f"0.25 l >= {goal:.0%}", step is not None and step["success_rate"] >= goal,
+             f"{step['success_rate']:.0%}" if step else "not run"),
+            (f"flat >= {FLAT_GOAL:.0%}", flat is not None and flat["success_rate"] >= FLAT_GOAL,
+             f"{flat['success_rate']:.0%}" if flat else "not run"),
+            (f"flat speed >= {SPEED_GOAL} sqrt(g l)", flat is not None and flat["forward_velocity_mean"] >= SPEED_GOAL * scale,
+             f"{flat['forward_velocity_mean'] / scale:.2f}" if flat else "not run"),
+            (f"each foot down {SHARE[0]:.0%}-{SHARE[1]:.0%}",
+             all(SHARE[0] <= x <= SHARE[1] for r in shown for x in r["foot_contact_share"]),
+             f"{min(min(r['foot_contact_share']) for r in shown):.2f}-{max(max(r['foot_contact_share']) for r in shown):.2f}"),
+            (f"no foot up > {SWING_S} s moving", all(long_swings(r)[0] == 0 for r in shown),
+             f"{max(long_swings(r)[0] for r in shown):.0%} of episodes have one"),
+            (f"strides under {STRIDE_HZ:g} Hz", stride < STRIDE_HZ, f"{stride:.1f}"),
+        ]
+        verdicts.append((name, checks))
+    out += ["", "| goal | " + " | ".join(name for name, _ in verdicts) + " |", "|---|" + "---|" * len(verdicts)]
+    for i, (goal, _, _) in enumerate(verdicts[0][1]):
+        cells = [f"{'met' if checks[i][1] else 'missed'} ({checks[i][2]})" for _, checks in verdicts]
+        out.append(f"| {goal} | " + " | ".join(cells) + " |")
+    return "\n".join(out) + "\n"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("robots", nargs="+", help="<robot dir>[:<sweep dir>]")
+    parser.add_argument("--sweep", default="sweep", help="the sweep's folder in each robot dir")
+    parser.add_argument("--goal", nargs="*", default=[], help="<robot>=<share at 0.25 l>, e.g. go1=0.9")
+    parser.add_argument("--out", type=Path)
+    args = parser.parse_args()
+    goals = {k: float(v) for k, _, v in (g.partition("=") for g in args.goal)}
+    entries = []
+    for given in args.robots:
+        run, _, sweep = given.partition(":")
+        run = Path(run)
+        robot = robot_of(run)
+        entries.append((robot.name, robot, load(Path(sweep) if sweep else run / args.sweep, ".")))
+    text = rows(entries, goals)
+    if args.out:
+        args.out.write_text(text)
+    print(text, end="")
+
+
+if __name__ == "__main__":
+    sys.exit(main())
