@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: setup train test bench trot clean
+.PHONY: setup train test bench trot robot clean
 
 setup: $(STAMP)
 
@@ -40,6 +40,19 @@ trot: $(STAMP)
 	$(call stage,$(STAGE1),experiment=quadruped_trot seed=$(SEED) $(ARGS))
 	$(call stage,$(TROT_DIR)/seed$(SEED),experiment=quadruped_trot_finetune seed=$(SEED) \
 		init_from=$(STAGE1)/checkpoints/last.pt $(ARGS))
+
+# A robot read from its model under the legged recipe (issue 46): experiment=legged_trot on XML in ROBOT_DIR
+# (resumed when a kill stopped it, kept when finished), then its height sweep from the last checkpoint,
+# EPISODES per height at HEIGHTS (in leg lengths l) on episode seeds SWEEP_SEED * 1000 + i, in ROBOT_DIR/sweep.
+#   make robot XML=../shared/robots/unitree_a1/scene.xml SEED=11 ROBOT_DIR=results/robots/<date>/a1 SWEEP_SEED=<s>
+HEIGHTS ?= 0,0.2l,0.25l,0.3l
+EPISODES ?= 100
+robot: $(STAMP)
+	@test -n "$(XML)" -a -n "$(SEED)" -a -n "$(ROBOT_DIR)" -a -n "$(SWEEP_SEED)" || { echo "error: make robot \
+	needs XML=<model file> SEED=<training seed> ROBOT_DIR=<run dir> SWEEP_SEED=<episode seed>" >&2; exit 2; }
+	$(call stage,$(ROBOT_DIR),experiment=legged_trot env.xml_file=$(XML) seed=$(SEED) logger=csv $(ARGS))
+	$(PY) -m ppo_torchrl.evaluate run=$(ROBOT_DIR) checkpoint=last episodes=$(EPISODES) seed=$(SWEEP_SEED) \
+		heights=$(HEIGHTS) out=$(ROBOT_DIR)/sweep
 
 # stage(run dir, overrides): start the run there, resume it when a run there stopped, skip it when it finished.
 stage = if grep -qs '"status": "finished"' $(1)/summary.json; then echo "$(1): finished"; \
