@@ -149,9 +149,13 @@ class LeggedConfig:
     belongs to one robot."""
 
     keyframe: Optional[str] = None  # the standing pose: this keyframe, else the model's 'home', else qpos0
-    # rad: each joint's target is its standing angle + action_scale x action (in [-1, 1]), or + its servo's
-    # saturation angle (peak torque / kp, from the model) x action where that is smaller
+    # rad: each joint's target is its standing angle + action_scale x action (in [-1, 1]), or, with
+    # saturation_cap, + its servo's saturation angle (peak torque / kp, from the model) x action where that is
+    # smaller. The cap (on for a bare env=legged, and for run dirs saved before the key existed) keeps random
+    # actions gentle on weak servos but also the reach: Go1's feet then rise at most 0.24 l, under the step.
+    # experiment=legged_trot turns it off and explores gently with the policy's initial std instead.
     action_scale: float = 0.5
+    saturation_cap: bool = True
     control_dt: float = 0.02  # s: the policy acts every control_dt (frame_skip = control_dt / the model's timestep)
     target_speed: float = 0.35  # x sqrt(g l): the forward reward counts speed up to this
     forward_reward_weight: float = 3.5  # per sqrt(g l) of forward speed

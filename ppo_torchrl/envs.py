@@ -147,7 +147,8 @@ def mjcf_kwargs(env_cfg) -> dict:
         from ppo_torchrl.robots.recipe import scaled_env
 
         env_cfg = scaled_env(env_cfg, read_robot(path, env_cfg.legged.keyframe))
-        robot = {"keyframe": env_cfg.legged.keyframe, "action_scale": env_cfg.legged.action_scale}
+        robot = {"keyframe": env_cfg.legged.keyframe, "action_scale": env_cfg.legged.action_scale,
+                 "saturation_cap": env_cfg.legged.get("saturation_cap", True)}
     loco = env_cfg.locomotion
     low, high = loco.healthy_z_range
     if not low < high:

@@ -109,6 +109,30 @@ def test_a_full_action_moves_a_joint_no_further_than_its_servo_saturates():
 
 
 @needs_robots
+def test_the_legged_recipe_moves_every_joint_by_the_action_scale_and_explores_gently():
+    """experiment=legged_trot turns the saturation cap off (under it a Go1 foot could rise only 0.24 l, under the
+    step of 0.25 l) and starts its policy at std 0.4; its start line says so. A saved run without the key keeps the
+    cap it trained with."""
+    from omegaconf import OmegaConf
+
+    from ppo_torchrl.compose import compose
+    from ppo_torchrl.envs import make_gym_env
+    from ppo_torchrl.robots.model import read_robot
+    from ppo_torchrl.robots.recipe import describe
+
+    cfg = compose(["experiment=legged_trot", f"env.xml_file={scene('unitree_go1')}"])
+    robot = make_gym_env(cfg.env).unwrapped
+    assert robot._ctrl_per_action == pytest.approx([0.5] * 12)
+    assert "actions move joints up to 0.50 rad" in describe(read_robot(scene("unitree_go1")), cfg.env.legged)
+    assert robot.ctrl_of(np.ones(12))[2] - robot.ctrl_of(np.zeros(12))[2] == pytest.approx(0.5)
+    saved = OmegaConf.create(OmegaConf.to_container(cfg))  # as a run dir's config.yaml is read back
+    del saved.env.legged["saturation_cap"]  # saved before the key existed: the cap it trained under
+    assert make_gym_env(saved.env).unwrapped._ctrl_per_action == pytest.approx([0.237, 0.237, 0.3555] * 4)
+    assert math.exp(cfg.policy.log_std_init) + cfg.policy.std_min == pytest.approx(0.4, abs=0.002)
+    assert OmegaConf.select(cfg, "env.terrain.flat_share") == 0.2
+
+
+@needs_robots
 def test_eval_measures_joint_torque_against_the_models_own_limits():
     """Standing (action 0) a Go1's servos hold well under their force range; driven to the ends of the action
     range they saturate: the peak share reaches 1.0 (the model's limit, not more) and the time at it shows."""

@@ -5,8 +5,8 @@ configured (so a config without these keys steps exactly as Ant-v5 does):
 
 - **A robot read from its model** (env=legged; robots/model.py): the standing pose from its keyframe,
   its feet, heading and drives; each action is a joint-angle offset from the standing pose
-  (target = standing angle + scale x action, action in [-1, 1]; scale: env.legged.action_scale, or the
-  servo's saturation angle, its peak torque / kp, where that is smaller) sent to the position servos
+  (target = standing angle + scale x action, action in [-1, 1]; scale: env.legged.action_scale, or with
+  env.legged.saturation_cap the servo's saturation angle, peak torque / kp, where smaller) sent to the servos
   as the model has them, torque motors being made PD servos first; the step added to the model at
   build time (robots/terrain.py).
 - **Heading** (`env.locomotion.heading`): the forward reward and eval's forward velocity are the main
@@ -126,7 +126,7 @@ class LocomotionEnv(StepTerrain, FootContacts, LeggedRewards, AntEnv):
 
     def __init__(self, xml_file: str, legged: Optional[dict] = None, terrain: Optional[dict] = None,
                  evaluation: bool = False, robot: Optional[dict] = None, **ant_kwargs):
-        """robot: env=legged's {'keyframe', 'action_scale'}: the robot read from xml_file (robots/model.py)
+        """robot: env=legged's {'keyframe', 'action_scale', 'saturation_cap'}: the robot read from xml_file (robots/model.py)
         stands, acts and meets its step as the module doc says; None: the model as it is."""
         legged, terrain = dict(legged or {}), dict(terrain or {})
         self._legged, self._terrain_cfg, self._evaluation = legged, terrain, evaluation
@@ -144,7 +144,7 @@ class LocomotionEnv(StepTerrain, FootContacts, LeggedRewards, AntEnv):
         model, data = self.model, self.data
         self._body_id = data.body(self._main_body).id
         if self._robot is not None:
-            self._drive_robot(float(robot["action_scale"]))
+            self._drive_robot(float(robot["action_scale"]), bool(robot.get("saturation_cap", True)))
             data.qpos[:] = self.init_qpos
         mujoco.mj_kinematics(model, data)  # the model's initial pose (reset computes it again)
         self._init_z = float(data.xpos[self._body_id][2])
@@ -289,7 +289,7 @@ class LocomotionEnv(StepTerrain, FootContacts, LeggedRewards, AntEnv):
             peak = np.abs(model.actuator_forcerange).max(axis=1) * gear
             model.dof_damping[self._act_dofs] += peak / speed
 
-    def _drive_robot(self, action_scale: float) -> None:
+    def _drive_robot(self, action_scale: float, cap: bool) -> None:
         """env=legged: the standing pose as the start, torque motors made PD servos (robots/model.py gives
         the gains), and the action as joint-angle offsets from the standing pose (module doc)."""
         model, robot = self.model, self._robot
@@ -308,7 +308,7 @@ class LocomotionEnv(StepTerrain, FootContacts, LeggedRewards, AntEnv):
         self.init_qpos = np.array(robot.qpos)
         gear = np.array(robot.gear)
         self._home_ctrl = gear * np.array(robot.home_angle)
-        self._ctrl_per_action = gear * np.array(robot.action_scales(action_scale))
+        self._ctrl_per_action = gear * np.array(robot.action_scales(action_scale, cap))
         limited = model.actuator_ctrllimited.astype(bool)
         self._ctrl_low = np.where(limited, model.actuator_ctrlrange[:, 0], -np.inf)
         self._ctrl_high = np.where(limited, model.actuator_ctrlrange[:, 1], np.inf)

@@ -17,8 +17,9 @@ derived from the MJCF and nothing else.
   motor saturates at that angle error; Menagerie's position servos saturate at 0.24-0.4 rad), kd =
   2 sqrt(kp I), critical damping of the joint's own inertia I at the standing pose (the mass matrix's
   diagonal, armature included); the force range is the motor's.
-- **Action scale**: a full action moves each joint's target by env.legged.action_scale, or by its servo's
-  saturation angle (peak torque / kp) where that is smaller (`Robot.action_scales`).
+- **Action scale**: a full action moves each joint's target by env.legged.action_scale, or (with
+  env.legged.saturation_cap) by its servo's saturation angle (peak torque / kp) where that is smaller
+  (`Robot.action_scales`).
 - **Size**: leg length l, thigh plus shank (hip-flexion joint to knee joint to foot centre, whatever
   the pose), the mean over the legs; mass, the sum of the robot's bodies.
 
@@ -73,11 +74,11 @@ class Robot:
     gear: tuple
     timestep: float  # s, the model's physics step
 
-    def action_scales(self, most: float) -> tuple:
+    def action_scales(self, most: float, cap: bool = True) -> tuple:
         """Per actuator, the angle (rad) a full action moves its joint's target from the standing pose: `most`
-        (env.legged.action_scale), or less where the servo saturates sooner, at its peak torque / kp (a larger
-        offset asks for torque the drive does not have: the same bang-bang, only harder to learn)."""
-        return tuple(min(most, peak / kp) if kp > 0 else most for peak, kp in zip(self.peak_torque, self.kp))
+        (env.legged.action_scale), or with `cap` less where the servo saturates sooner, at its peak torque / kp
+        (a larger offset asks for torque the drive does not have; but it also bounds how far a joint can go)."""
+        return tuple(min(most, peak / kp) if cap and kp > 0 else most for peak, kp in zip(self.peak_torque, self.kp))
 
     @property
     def speed_scale(self) -> float:

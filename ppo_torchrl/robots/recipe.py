@@ -74,7 +74,7 @@ def describe(robot: Robot, legged) -> str:
     values = derived_values(robot, legged)
     loco, terrain = values["locomotion"], values["terrain"]
     clock = f", trot clock {loco['gait_period']:.2f} s" if loco["gait_period"] else ""
-    scales = robot.action_scales(legged.action_scale)
+    scales = robot.action_scales(legged.action_scale, legged.get("saturation_cap", True))
     reach = f"{min(scales):.2f}" + (f"-{max(scales):.2f}" if max(scales) > min(scales) else "")
     return (f"{robot.describe()}; recipe: step {terrain['eval_step_height'] * 100:.1f} cm (0.25 l), speed up to "
             f"{loco['target_speed']:.2f} m/s, fall under {loco['healthy_z_range'][0] * 100:.1f} cm, actions move "
