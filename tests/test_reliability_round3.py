@@ -160,7 +160,7 @@ def test_a_float32_gymnasium_env_trains_evaluates_and_exports(tmp_path):
 
 
 @pytest.mark.parametrize("args, expected", [
-    (["-m", "seed=range(4294967230,4294967297)"], "seed=4294967296 must be in [0, 2^32)"),  # job 67 of 67
+    (["-m", "seed=range(4294967293,4294967297)"], "seed=4294967296 must be in [0, 2^32)"),  # the last of 4 jobs
     (["collector.total_frames=1000000000000000000000000000000"], "must be <= 10^12"),
     (["optim.lr=inf"], "optim.lr=inf must be a finite number"),
     (["loss.gae_lambda_typo=1"], "Key 'gae_lambda_typo' not in"),

@@ -13,7 +13,7 @@ from matplotlib.container import ErrorbarContainer
 from tensordict import TensorDict
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
-from ppo_torchrl import export, report
+from ppo_torchrl import evaluate, export, report
 from ppo_torchrl.checkpoint import load_policy
 from ppo_torchrl.evaluate import evaluate_policy
 from ppo_torchrl.filming import EpisodeProgress
@@ -168,14 +168,22 @@ def test_filming_talks_while_it_renders(tmp_path, capsys):
     env.close()
 
 
-def test_evaluate_bad_input_is_one_line(trained_run):
-    for args, expected in [(["run=/nonexistent"], "run=/nonexistent: no such dir"),
-                           ([f"run={ROOT / 'conf'}"], "not a ppo_torchrl run dir (no checkpoints/)"),
+def test_evaluate_bad_input_is_one_line(trained_run, capsys):
+    """One case as a process (the exit code and stderr a shell sees), the rest through the same error path
+    in-process (errors.guarded, which the entry point runs main under)."""
+    from ppo_torchrl.errors import guarded
+
+    result = run_cli("run=/nonexistent", module="ppo_torchrl.evaluate")
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    assert "run=/nonexistent: no such dir" in result.stderr.strip().splitlines()[-1]
+    for args, expected in [([f"run={ROOT / 'conf'}"], "not a ppo_torchrl run dir (no checkpoints/)"),
                            ([f"run={trained_run}", "episodes=many"], "expected a int"),
                            ([f"run={trained_run}", "checkpoint=nope.pt"], "does not exist")]:
-        result = run_cli(*args, module="ppo_torchrl.evaluate")
-        assert result.returncode == 2 and "Traceback" not in result.stderr
-        assert expected in result.stderr.strip().splitlines()[-1]
+        capsys.readouterr()
+        with pytest.raises(SystemExit) as exit_:
+            guarded(evaluate.main, args)
+        lines = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+        assert exit_.value.code == 2 and len(lines) == 1 and expected in lines[0], lines
 
 
 def test_exported_policy_matches_the_actor_and_runs_without_torchrl(trained_run, tmp_path):
