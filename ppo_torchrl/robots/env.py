@@ -92,8 +92,6 @@ def heading_angle(heading) -> Optional[float]:
     return angle
 
 
-
-
 DRAWN_GROUPS = 3  # MuJoCo's default visual options draw geom groups 0, 1 and 2
 HIDDEN_GROUP = 3  # where MuJoCo Menagerie's models keep their collision geoms
 
@@ -126,8 +124,8 @@ class LocomotionEnv(StepTerrain, FootContacts, LeggedRewards, AntEnv):
 
     def __init__(self, xml_file: str, legged: Optional[dict] = None, terrain: Optional[dict] = None,
                  evaluation: bool = False, robot: Optional[dict] = None, **ant_kwargs):
-        """robot: env=legged's {'keyframe', 'action_scale', 'saturation_cap'}: the robot read from xml_file (robots/model.py)
-        stands, acts and meets its step as the module doc says; None: the model as it is."""
+        """robot: env=legged's {'keyframe', 'action_scale', 'saturation_cap'}: the robot read from xml_file
+        (robots/model.py) stands, acts and meets its step as the module doc says; None: the model as it is."""
         legged, terrain = dict(legged or {}), dict(terrain or {})
         self._legged, self._terrain_cfg, self._evaluation = legged, terrain, evaluation
         self._add_track_camera = False
@@ -144,7 +142,7 @@ class LocomotionEnv(StepTerrain, FootContacts, LeggedRewards, AntEnv):
         model, data = self.model, self.data
         self._body_id = data.body(self._main_body).id
         if self._robot is not None:
-            self._drive_robot(float(robot["action_scale"]), bool(robot.get("saturation_cap", True)))
+            self._drive_robot(float(robot["action_scale"]), bool(robot["saturation_cap"]))
             data.qpos[:] = self.init_qpos
         mujoco.mj_kinematics(model, data)  # the model's initial pose (reset computes it again)
         self._init_z = float(data.xpos[self._body_id][2])
