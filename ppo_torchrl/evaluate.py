@@ -296,15 +296,14 @@ def apply_overrides(cfg, overrides: list[str]):
     """`env.<key>=<value>` arguments on the run's saved config, typed and checked as training checks them."""
     from omegaconf import OmegaConf
 
-    from ppo_torchrl.robots.env import locomotion_checks
-    from ppo_torchrl.robots.terrain import terrain_checks
+    from ppo_torchrl.validation import env_checks
 
     for override in overrides:
         try:
             cfg = OmegaConf.merge(cfg, OmegaConf.from_dotlist([override]))
         except Exception as exc:  # omegaconf: an unknown key or a value of the wrong type
             raise ConfigError(f"cannot apply '{override}' to the run's config: {str(exc).splitlines()[0]}") from None
-    for ok, message in locomotion_checks(cfg.env.locomotion) + terrain_checks(cfg.env.terrain):
+    for ok, message in env_checks(cfg.env):
         if not ok:
             raise ConfigError(message)
     return cfg

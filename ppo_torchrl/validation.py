@@ -33,6 +33,21 @@ def _scaled_for_checks(env_cfg):
     return scaled_env(env_cfg, read_robot(resolve_model_file(env_cfg.xml_file), env_cfg.legged.keyframe))
 
 
+def env_checks(env_cfg) -> list:
+    """env.legged's checks, then the locomotion and terrain checks on the values its recipe gives the robot
+    (env=legged; any other env's as they are): training and evaluate's env.<key>=<value> check one way (a
+    legged run's saved config leaves the derived keys, such as the curriculum's height range, to the recipe)."""
+    from ppo_torchrl.robots.env import locomotion_checks
+    from ppo_torchrl.robots.recipe import legged_checks
+    from ppo_torchrl.robots.terrain import terrain_checks
+
+    legged = legged_checks(env_cfg.get("legged"))
+    if not all(ok for ok, _ in legged):  # the recipe cannot scale bad targets
+        return legged
+    scaled = _scaled_for_checks(env_cfg)
+    return legged + locomotion_checks(scaled.locomotion) + terrain_checks(scaled.get("terrain"))
+
+
 def one_of(name: str, value, choices) -> tuple:
     return value in choices, f"{name}='{value}' is not known; use one of {', '.join(choices)}"
 
@@ -124,15 +139,10 @@ def validate_config(cfg):
         one_of("logger", cfg.logger.name, LOGGERS),
         (cfg.torch_threads >= 1, f"torch_threads={cfg.torch_threads} must be >= 1"),
     ]
-    from ppo_torchrl.robots.env import locomotion_checks
-    from ppo_torchrl.robots.recipe import legged_checks
-    from ppo_torchrl.robots.terrain import terrain_checks
-
-    for ok, message in checks + legged_checks(env.get("legged")):
+    for ok, message in checks:
         if not ok:
             raise ConfigError(message)
-    scaled = _scaled_for_checks(env)  # env=legged: the values its recipe gives this robot are checked too
-    for ok, message in locomotion_checks(scaled.locomotion) + terrain_checks(scaled.get("terrain")):
+    for ok, message in env_checks(env):  # after the plain values: env=legged reads its model here
         if not ok:
             raise ConfigError(message)
     if env.get("xml_file"):

@@ -316,6 +316,17 @@ def test_a_legged_run_is_named_by_its_model_and_says_what_was_read(tmp_path):
     assert [float(r["step_height_m"]) for r in rows] == pytest.approx([0.0, 0.075, 0.09])
     refused = run_app("env=legged", f"env.xml_file={model}", "env.locomotion.target_speed=1.0", cwd=tmp_path)
     assert refused.returncode == 2 and "env.legged.target_speed" in refused.stderr, refused.stderr
+    # evaluate's env.<key>=<value> checks as training does: a step in m on a run whose curriculum range the
+    # recipe derives (it was refused, 'curriculum=true needs step_height_range'); a bad target is one line
+    from ppo_torchrl import evaluate
+    from ppo_torchrl.errors import guarded
+
+    fixed = evaluate.main([f"run={runs[0]}", "checkpoint=last", "episodes=1", "env.terrain.step_height=0.05",
+                           f"out={tmp_path / 'at_5cm'}"])
+    assert fixed["step_height_mean"] == pytest.approx(0.05)
+    with pytest.raises(SystemExit) as exit_:
+        guarded(evaluate.main, [f"run={runs[0]}", "env.legged.step_height=-1", f"out={tmp_path / 'bad'}"])
+    assert exit_.value.code == 2 and not (tmp_path / "bad").exists()
 
 
 @needs_robots
