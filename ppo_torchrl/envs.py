@@ -104,6 +104,32 @@ class MjcfInfo:
     ctrl_from_force: tuple  # (actuator id, low, high): no ctrlrange, control bounds from its forcerange
 
 
+def _scaled_for_checks(env_cfg):
+    """The env config whose locomotion and terrain values are checked: env=legged's scaled to its robot
+    (read from env.xml_file: a model that cannot be read is one line here), any other as it is."""
+    if env_cfg.get("legged") is None or not env_cfg.get("xml_file"):
+        return env_cfg
+    from ppo_torchrl.robots.model import read_robot
+    from ppo_torchrl.robots.recipe import scaled_env
+
+    return scaled_env(env_cfg, read_robot(resolve_model_file(env_cfg.xml_file), env_cfg.legged.keyframe))
+
+
+def env_checks(env_cfg) -> list:
+    """env.legged's checks, then the locomotion and terrain checks on the values its recipe gives the robot
+    (env=legged; any other env's as they are): training and evaluate's env.<key>=<value> check one way (a
+    legged run's saved config leaves the derived keys, such as the curriculum's height range, to the recipe)."""
+    from ppo_torchrl.robots.env import locomotion_checks
+    from ppo_torchrl.robots.recipe import legged_checks
+    from ppo_torchrl.robots.terrain import terrain_checks
+
+    legged = legged_checks(env_cfg.get("legged"))
+    if not all(ok for ok, _ in legged):  # the recipe cannot scale bad targets
+        return legged
+    scaled = _scaled_for_checks(env_cfg)
+    return legged + locomotion_checks(scaled.locomotion) + terrain_checks(scaled.get("terrain"))
+
+
 @functools.lru_cache(maxsize=None)
 def check_mjcf(path: Path) -> MjcfInfo:
     """The model must compile in MuJoCo, have a free-floating base and at least one actuator, each

@@ -28,7 +28,7 @@ import numpy as np
 import torch
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
-from ppo_torchrl.envs import env_label, episode_seeds, make_torchrl_env
+from ppo_torchrl.envs import env_checks, env_label, episode_seeds, make_torchrl_env
 from ppo_torchrl.filming import VIDEO_SIZE, EpisodeProgress, Filming, video_line
 from ppo_torchrl.env_state import env_state_of
 from ppo_torchrl.errors import ConfigError
@@ -295,8 +295,6 @@ SWEEP_FILES = ("height_sweep.csv", "height_sweep.png", "height_sweep_episodes.cs
 def apply_overrides(cfg, overrides: list[str]):
     """`env.<key>=<value>` arguments on the run's saved config, typed and checked as training checks them."""
     from omegaconf import OmegaConf
-
-    from ppo_torchrl.validation import env_checks
 
     for override in overrides:
         try:

@@ -21,33 +21,6 @@ DISTRIBUTED = ("ray",)
 RAY_INSTALL = 'pip install -e ".[ray]" (or: pip install "ray[default]<3")'
 
 
-def _scaled_for_checks(env_cfg):
-    """The env config whose locomotion and terrain values are checked: env=legged's scaled to its robot
-    (read from env.xml_file: a model that cannot be read is one line here), any other as it is."""
-    if env_cfg.get("legged") is None or not env_cfg.get("xml_file"):
-        return env_cfg
-    from ppo_torchrl.envs import resolve_model_file
-    from ppo_torchrl.robots.model import read_robot
-    from ppo_torchrl.robots.recipe import scaled_env
-
-    return scaled_env(env_cfg, read_robot(resolve_model_file(env_cfg.xml_file), env_cfg.legged.keyframe))
-
-
-def env_checks(env_cfg) -> list:
-    """env.legged's checks, then the locomotion and terrain checks on the values its recipe gives the robot
-    (env=legged; any other env's as they are): training and evaluate's env.<key>=<value> check one way (a
-    legged run's saved config leaves the derived keys, such as the curriculum's height range, to the recipe)."""
-    from ppo_torchrl.robots.env import locomotion_checks
-    from ppo_torchrl.robots.recipe import legged_checks
-    from ppo_torchrl.robots.terrain import terrain_checks
-
-    legged = legged_checks(env_cfg.get("legged"))
-    if not all(ok for ok, _ in legged):  # the recipe cannot scale bad targets
-        return legged
-    scaled = _scaled_for_checks(env_cfg)
-    return legged + locomotion_checks(scaled.locomotion) + terrain_checks(scaled.get("terrain"))
-
-
 def one_of(name: str, value, choices) -> tuple:
     return value in choices, f"{name}='{value}' is not known; use one of {', '.join(choices)}"
 
@@ -142,6 +115,8 @@ def validate_config(cfg):
     for ok, message in checks:
         if not ok:
             raise ConfigError(message)
+    from ppo_torchrl.envs import env_checks
+
     for ok, message in env_checks(env):  # after the plain values: env=legged reads its model here
         if not ok:
             raise ConfigError(message)
