@@ -15,7 +15,7 @@ import sys
 from pathlib import Path
 
 from ppo_torchrl import signals
-from ppo_torchrl.errors import Interrupted, guarded
+from ppo_torchrl.errors import guarded, signal_in_chain
 from ppo_torchrl.compose import CONF_DIR, compose, hydra_value, register_resolvers, show_job
 from ppo_torchrl.overrides import (HELP_FLAGS, INFO_FLAGS, check_env_override, route_paths, split_args, unquote,
                                    whole_counts, with_override)
@@ -54,8 +54,8 @@ def _run_job(cfg) -> float:
         if cfg.trial_seeds:
             return run_seeds(cfg, run_dir)
         return objective(train(cfg, run_dir, state, next_steps=not multirun))  # a sweep ends with its report command
-    except (Interrupted, KeyboardInterrupt):
-        if multirun:
+    except BaseException as error:  # a signal, also one a library wrapped in its own error (at set-up)
+        if multirun and signal_in_chain(error) is not None:
             fail_running_trial(HydraConfig.get().sweeper)
         raise
     finally:

@@ -50,7 +50,7 @@ class Interrupted(Exception):
         self.signum = signum
 
 
-def _signal_in_chain(error: BaseException):
+def signal_in_chain(error: BaseException):
     """A KeyboardInterrupt (a signal) that a library turned into another error while importing or starting
     (torch's and others' `except Exception: raise ImportError(...)`), or None."""
     seen = set()
@@ -67,7 +67,7 @@ def _user_fixable_os_error(error: BaseException):
 
 
 def exit_code(error: BaseException) -> int:
-    error = _signal_in_chain(error) or error
+    error = signal_in_chain(error) or error
     if isinstance(error, (Interrupted, KeyboardInterrupt)):
         signum = getattr(error, "signum", 2)
         return EXIT_SIGNAL.get(signum, 128 + signum)
@@ -82,7 +82,7 @@ def message_of(error: BaseException) -> str:
     """The one line for an error (an internal one also gets its traceback written to a log)."""
     from ppo_torchrl.signals import ON_DISK
 
-    error = _signal_in_chain(error) or error
+    error = signal_in_chain(error) or error
     if isinstance(error, KeyboardInterrupt):  # a signal outside the training loop
         return f"interrupted: stopped at once; {ON_DISK.describe()}"
     if isinstance(error, Interrupted):

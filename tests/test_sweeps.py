@@ -267,4 +267,4 @@ def test_ctrl_c_in_a_stored_optuna_trial_marks_it_failed(tmp_path):
     assert proc.returncode == 130, err[-1500:]
     (summary,) = optuna.get_all_study_summaries(storage)
     states = [t.state for t in optuna.load_study(study_name=summary.study_name, storage=storage).trials]
-    assert states == [optuna.trial.TrialState.FAIL], states
+    assert states == [optuna.trial.TrialState.FAIL], (states, err[-1500:])
