@@ -15,7 +15,7 @@ import sys
 from pathlib import Path
 
 from ppo_torchrl import signals
-from ppo_torchrl.errors import guarded, signal_in_chain
+from ppo_torchrl.errors import EXIT_SIGNAL, guarded, signal_in_chain
 from ppo_torchrl.compose import CONF_DIR, compose, hydra_value, register_resolvers, show_job
 from ppo_torchrl.overrides import (HELP_FLAGS, INFO_FLAGS, check_env_override, route_paths, split_args, unquote,
                                    whole_counts, with_override)
@@ -126,6 +126,11 @@ def cli() -> None:
     sys.argv = [sys.argv[0]] + prepare(sys.argv[1:])
     try:
         hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")(main)()
+    except BaseException as error:  # a job ends by sys.exit(its code); a signal: 130 / 143
+        signalled = signal_in_chain(error) is not None or getattr(error, "code", None) in EXIT_SIGNAL.values()
+        if signalled and "study" in SWEEP:
+            fail_running_trial(SWEEP["study"])
+        raise
     finally:  # a sweep dir whose every job was refused, or a run stopped before it started: as it was
         rundir.finish()
     if SWEEP:

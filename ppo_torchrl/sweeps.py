@@ -16,7 +16,7 @@ from ppo_torchrl.errors import ConfigError
 # A sweep job's dir is <num>_<the overrides that vary> (conf/config.yaml: hydra.sweep.subdir); prepare() tells
 # Hydra which keys do not vary through this list.
 EXCLUDE_KEYS = "hydra.job.config.override_dirname.exclude_keys"
-SWEEP = {}  # the sweep dir this command claimed (prepare), for the line that ends the sweep
+SWEEP = {}  # the sweep dir this command claimed (prepare), for the line that ends the sweep; its Optuna study
 
 
 def objective(summary: dict) -> float:
@@ -28,8 +28,10 @@ def objective(summary: dict) -> float:
 
 
 def fail_running_trial(sweeper) -> None:
-    """A signal in a trial of a stored Optuna study: the study's running trial (this job's: the sweeper runs one
-    at a time) is marked failed now, so the stored study never shows it running."""
+    """A signal in a trial of a stored Optuna study: the study's running trial (the sweeper runs one at a time)
+    is marked failed now, so the stored study never shows it running. Called by the job that the signal stopped
+    and again by the command as it exits (`__main__.cli`), where what the job was doing cannot stop it; from a
+    job `sweeper` is its hydra.sweeper config, at the exit the study `announce_study` recorded in SWEEP."""
     storage, name = sweeper.get("storage"), sweeper.get("study_name")
     if not (storage and name and "optuna" in str(sweeper.get("_target_", ""))):
         return
@@ -125,6 +127,7 @@ def announce_study(hydra_cfg, overrides: list[str]) -> None:
         space += [o for o in overrides if o not in hydra]
         state += check_stored_study(optuna.load_study(study_name=name, storage=storage), space)
     print(f"optuna: {state} in {storage}", file=sys.stderr, flush=True)
+    SWEEP["study"] = {"storage": storage, "study_name": name, "_target_": "optuna"}  # for fail_running_trial
 
 
 def check_stored_study(study, space: list[str]) -> str:
