@@ -20,8 +20,8 @@ from ppo_torchrl.compose import CONF_DIR, compose, hydra_value, register_resolve
 from ppo_torchrl.overrides import (HELP_FLAGS, INFO_FLAGS, check_env_override, route_paths, split_args, unquote,
                                    whole_counts, with_override)
 from ppo_torchrl.resume import check_resume
-from ppo_torchrl.sweeps import (SWEEP, announce_study, dry_run, fail_running_trial, hydra_overrides, job_dirs,
-                                objective, run_seeds, sweep_done, sweep_jobs)
+from ppo_torchrl.sweeps import (SWEEP, announce_study, dry_run, fail_running_trials, hydra_overrides, job_dirs,
+                                objective, run_seeds, stored_study, sweep_done, sweep_jobs)
 
 if __name__ == "__main__":
     signals.install()  # from here on a Ctrl-C or SIGTERM is one line and exit 130 / 143, imports included
@@ -55,8 +55,9 @@ def _run_job(cfg) -> float:
             return run_seeds(cfg, run_dir)
         return objective(train(cfg, run_dir, state, next_steps=not multirun))  # a sweep ends with its report command
     except BaseException as error:  # a signal, also one a library wrapped in its own error (at set-up)
-        if multirun and signal_in_chain(error) is not None:
-            fail_running_trial(HydraConfig.get().sweeper)
+        study = stored_study(HydraConfig.get().sweeper) if multirun else None
+        if study and signal_in_chain(error) is not None:
+            fail_running_trials(**study)
         raise
     finally:
         rundir.rollback(run_dir)  # a job refused before it started training leaves its dir as it was
@@ -129,7 +130,7 @@ def cli() -> None:
     except BaseException as error:  # a job ends by sys.exit(its code); a signal: 130 / 143
         signalled = signal_in_chain(error) is not None or getattr(error, "code", None) in EXIT_SIGNAL.values()
         if signalled and "study" in SWEEP:
-            fail_running_trial(SWEEP["study"])
+            fail_running_trials(**SWEEP["study"])
         raise
     finally:  # a sweep dir whose every job was refused, or a run stopped before it started: as it was
         rundir.finish()

@@ -27,17 +27,21 @@ def objective(summary: dict) -> float:
     return float("-inf")
 
 
-def fail_running_trial(sweeper) -> None:
+def stored_study(sweeper):
+    """A job's hydra.sweeper config: {storage, study_name} of its stored Optuna study, else None."""
+    storage, name = sweeper.get("storage"), sweeper.get("study_name")
+    ok = storage and name and "optuna" in str(sweeper.get("_target_", ""))
+    return {"storage": storage, "study_name": name} if ok else None
+
+
+def fail_running_trials(storage: str, study_name: str) -> None:
     """A signal in a trial of a stored Optuna study: the study's running trial (the sweeper runs one at a time)
     is marked failed now, so the stored study never shows it running. Called by the job that the signal stopped
-    and again by the command as it exits (`__main__.cli`), where what the job was doing cannot stop it; from a
-    job `sweeper` is its hydra.sweeper config, at the exit the study `announce_study` recorded in SWEEP."""
-    storage, name = sweeper.get("storage"), sweeper.get("study_name")
-    if not (storage and name and "optuna" in str(sweeper.get("_target_", ""))):
-        return
+    and again by the command as it exits (`__main__.cli`, with the study `announce_study` recorded in SWEEP),
+    where nothing the job was doing can stop it."""
     import optuna
 
-    study = optuna.load_study(study_name=name, storage=storage)
+    study = optuna.load_study(study_name=study_name, storage=storage)
     for trial in study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.RUNNING,)):
         study.tell(trial.number, state=optuna.trial.TrialState.FAIL)
 
@@ -127,7 +131,7 @@ def announce_study(hydra_cfg, overrides: list[str]) -> None:
         space += [o for o in overrides if o not in hydra]
         state += check_stored_study(optuna.load_study(study_name=name, storage=storage), space)
     print(f"optuna: {state} in {storage}", file=sys.stderr, flush=True)
-    SWEEP["study"] = {"storage": storage, "study_name": name, "_target_": "optuna"}  # for fail_running_trial
+    SWEEP["study"] = {"storage": storage, "study_name": name}  # for fail_running_trials
 
 
 def check_stored_study(study, space: list[str]) -> str:
