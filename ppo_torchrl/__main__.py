@@ -130,7 +130,11 @@ def cli() -> None:
     except BaseException as error:  # a job ends by sys.exit(its code); a signal: 130 / 143
         signalled = signal_in_chain(error) is not None or getattr(error, "code", None) in EXIT_SIGNAL.values()
         if signalled and "study" in SWEEP:
-            fail_running_trials(**SWEEP["study"])
+            try:  # the exit keeps its code (130 / 143) whatever the storage does
+                fail_running_trials(**SWEEP["study"])
+            except Exception as storage_error:  # noqa: BLE001 - the next command on the study marks it failed
+                print(f"note: the running trial stays RUNNING in {SWEEP['study']['storage']} ({storage_error}); "
+                      "the next command on this study marks it failed", file=sys.stderr, flush=True)
         raise
     finally:  # a sweep dir whose every job was refused, or a run stopped before it started: as it was
         rundir.finish()
