@@ -238,7 +238,7 @@ def motion_line(result: dict) -> str:
     went = [f"forward velocity {result['forward_velocity_mean']:.2f} +- {result['forward_velocity_std']:.2f} m/s"] \
         if moving else []
     if "success_margin" in result:
-        went.append(f"{result['success_rate']:.0%} of episodes cross the line {result['success_margin']} m beyond the "
+        went.append(f"{result['success_rate']:.0%} of episodes cross the line {result['success_margin']:.3g} m beyond the "
                     f"step ({result['step_height_mean'] * 100:.0f} cm on average) {honest}")
     elif "success_rate" in result:
         went.append(f"{result['success_rate']:.0%} of episodes end beyond x={result['success_x']} m {honest}")
