@@ -64,7 +64,7 @@ def rows(entries: list, goals: dict) -> str:
         stride = max(max(r["touchdown_frequency"]) for r in shown)
         torque = ", ".join(f"{r['peak_torque_share']:.2f} / {r['torque_at_limit_share']:.0%}" for r in shown)
         out.append(f"| {name} | {robot.mass:.1f} kg | {l:.3f} m | {STEP * l * 100:.1f} cm | {success} | {speed} "
-                   f"| {shares} | {swings} | {stride:.1f} | {torque} |")
+                   f"| {shares} | {swings} | {stride:.2f} | {torque} |")
         goal = goals.get(name, TUNING_GOAL.get(name, 0.8))
         checks = [
             (f"0.25 l >= {goal:.0%}", step is not None and step["success_rate"] >= goal,
@@ -78,7 +78,7 @@ def rows(entries: list, goals: dict) -> str:
              f"{min(min(r['foot_contact_share']) for r in shown):.2f}-{max(max(r['foot_contact_share']) for r in shown):.2f}"),
             (f"no foot up > {SWING_S} s moving", all(long_swings(r)[0] == 0 for r in shown),
              f"{max(long_swings(r)[0] for r in shown):.0%} of episodes have one"),
-            (f"strides under {STRIDE_HZ:g} Hz", stride < STRIDE_HZ, f"{stride:.1f}"),
+            (f"strides under {STRIDE_HZ:g} Hz", stride < STRIDE_HZ, f"{stride:.2f}"),
         ]
         verdicts.append((name, checks))
     out += ["", "| goal | " + " | ".join(name for name, _ in verdicts) + " |", "|---|" + "---|" * len(verdicts)]
