@@ -355,6 +355,32 @@ def test_a_filmed_robot_whose_visual_meshes_were_left_out_is_drawn():
 
 
 @needs_robots
+def test_a_step_of_height_zero_is_not_drawn():
+    """Flat ground is the step at height 0, its top in the floor's plane: filmed, the two flickered as dark
+    patches. Such a step is transparent (MuJoCo does not draw it) and the same box, raised, is drawn again;
+    the frame at height 0 is the frame of a model whose step is far away."""
+    from ppo_torchrl.compose import compose
+    from ppo_torchrl.envs import make_gym_env
+
+    cfg = compose(["experiment=legged_trot", f"env.xml_file={scene('unitree_go2')}", "env.terrain.step_height=0",
+                   "env.locomotion.reset_noise_scale=0"])
+    env = make_gym_env(cfg.env, render_mode="rgb_array", width=96, height=72).unwrapped
+    env.reset(seed=0)
+    step = env.model.geom("step").id
+    assert env.model.geom_rgba[step, 3] == 0.0
+
+    def frame(height, distance):
+        env._place_step(height, distance)
+        mujoco.mj_forward(env.model, env.data)
+        env.render()  # (the first frame after a change can differ from the next ones)
+        return env.render().astype(int)
+
+    flat = frame(0.0, env.model_step[1])
+    assert np.abs(frame(0.0, 1000.0) - flat).max() <= 8  # the same step, out of the camera's view
+    assert np.abs(frame(0.1, env.model_step[1]) - flat).max() > 8 and env.model.geom_rgba[step, 3] == 1.0
+
+
+@needs_robots
 def test_unnamed_feet_go_by_their_corner_in_evals():
     """ANYmal B's and A1's foot spheres have no name: the gait line and the sweep's columns call them by their
     corner (they said 'foot 0'..'foot 3'); named feet keep their names."""

@@ -71,6 +71,7 @@ class StepTerrain:
         if len(geoms) != 1 or model.geom_type[geoms[0]] != mujoco.mjtGeom.mjGEOM_BOX:
             raise ConfigError(f"the model's body '{STEP_BODY}' must hold one box geom (the step)")
         g = geoms[0]
+        self._step_geom, self._step_alpha = g, float(model.geom_rgba[g, 3])
         self._half = model.geom_size[g].copy()  # the box's half sizes
         self._box_offset = model.geom_pos[g].copy()
         # Distances run along the heading: the step's edge, the success line and the height samples
@@ -132,6 +133,9 @@ class StepTerrain:
         along = edge + self._half[0] - self._box_offset[0]
         xy = along * self.heading + (self._side @ self._step_pos0[:2]) * self._side
         self.model.body_pos[self._step_id] = [xy[0], xy[1], height - self._half[2] - self._box_offset[2]]
+        # a step of height 0 is not drawn: its top in the floor's plane filmed as flickering dark patches
+        # (z-fighting); MuJoCo does not draw a transparent geom, and no contact or force reads the colour
+        self.model.geom_rgba[self._step_geom, 3] = self._step_alpha if height > 0 else 0.0
         self.step_height, self.step_edge = height, edge
 
     def _draw_step(self) -> None:
