@@ -41,9 +41,17 @@ def fail_running_trials(storage: str, study_name: str) -> None:
     where nothing the job was doing can stop it."""
     import optuna
 
-    study = optuna.load_study(study_name=study_name, storage=storage)
-    for trial in study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.RUNNING,)):
+    fail_trials_running(optuna.load_study(study_name=study_name, storage=storage))
+
+
+def fail_trials_running(study) -> int:
+    """Marks the study's RUNNING trials failed; returns how many there were."""
+    import optuna
+
+    running = study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.RUNNING,))
+    for trial in running:
         study.tell(trial.number, state=optuna.trial.TrialState.FAIL)
+    return len(running)
 
 
 def run_seeds(cfg, run_dir: Path) -> float:
@@ -138,8 +146,6 @@ def check_stored_study(study, space: list[str]) -> str:
     """A stored study must search the space the command gives (`key=choice(...)` overrides, the last of a key
     wins; Optuna would fail in the first trial and leave it RUNNING); trials an interrupted sweep left RUNNING
     are marked failed. Returns what it did, for the line."""
-    import optuna
-
     from ppo_torchrl.internals import optuna_space
 
     wanted = optuna_space(space)
@@ -150,10 +156,8 @@ def check_stored_study(study, space: list[str]) -> str:
                 raise ConfigError(f"optuna study {study.study_name} searched {key} over {distribution}, this command "
                                   f"over {wanted[key]}; keep the stored space or name a new study with "
                                   "hydra.sweeper.study_name=<name>")
-    stale = [t for t in trials if t.state == optuna.trial.TrialState.RUNNING]
-    for trial in stale:
-        study.tell(trial.number, state=optuna.trial.TrialState.FAIL)
-    return f" ({len(stale)} left running by an interrupted sweep marked failed)" if stale else ""
+    stale = fail_trials_running(study)
+    return f" ({stale} left running by an interrupted sweep marked failed)" if stale else ""
 
 
 def job_dirs(overrides: list[str], basic: bool) -> list[str]:
