@@ -41,10 +41,10 @@ def fail_running_trials(storage: str, study_name: str) -> None:
     where nothing the job was doing can stop it."""
     import optuna
 
-    fail_trials_running(optuna.load_study(study_name=study_name, storage=storage))
+    mark_running_failed(optuna.load_study(study_name=study_name, storage=storage))
 
 
-def fail_trials_running(study) -> int:
+def mark_running_failed(study) -> int:
     """Marks the study's RUNNING trials failed; returns how many there were."""
     import optuna
 
@@ -156,7 +156,7 @@ def check_stored_study(study, space: list[str]) -> str:
                 raise ConfigError(f"optuna study {study.study_name} searched {key} over {distribution}, this command "
                                   f"over {wanted[key]}; keep the stored space or name a new study with "
                                   "hydra.sweeper.study_name=<name>")
-    stale = fail_trials_running(study)
+    stale = mark_running_failed(study)
     return f" ({stale} left running by an interrupted sweep marked failed)" if stale else ""
 
 
