@@ -1,7 +1,8 @@
-"""Copy the evidence of a sweep into results/: per run summary.json, metrics.csv and config.yaml,
-plus the sweep report (PNG, markdown, CSV) and a per-env table over seeds.
+"""Copy the evidence of a sweep into results/: per run summary.json, config.yaml and metrics.csv as its record
+metrics.csv.xz (ppo_torchrl.records), plus the sweep report (PNG, markdown, CSV) and a per-env table over seeds.
 
     python benchmarks/collect_results.py outputs/multirun/quality_1m results/quality_1m
+    python benchmarks/collect_results.py --table results/quality_1m        # the table again, from the records
 """
 
 import json
@@ -11,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ppo_torchrl import report
+from ppo_torchrl import records, report
 
 
 def copy_finished_runs(sweep: Path, dest: Path, name_of) -> dict:
@@ -29,9 +30,19 @@ def copy_finished_runs(sweep: Path, dest: Path, name_of) -> dict:
         name = name_of(s, yaml.safe_load((summary.parent / "config.yaml").read_text()))
         run = dest / f"{name}_seed{s['seed']}"
         run.mkdir(exist_ok=True)
-        for file in ("summary.json", "metrics.csv", "config.yaml"):
+        for file in ("summary.json", "config.yaml"):
             shutil.copy(summary.parent / file, run / file)
+        shutil.copy(records.compress(summary.parent / "metrics.csv"), run / "metrics.csv.xz")
         rows.setdefault(name, []).append(s)
+    return rows
+
+
+def recorded_runs(dest: Path) -> dict:
+    """The summaries of the runs collected in dest (<name>_seed<k>/summary.json), by name."""
+    rows = {}
+    for summary in sorted(dest.glob("*_seed*/summary.json")):
+        s = json.loads(summary.read_text())
+        rows.setdefault(summary.parent.name.rsplit("_seed", 1)[0], []).append(s)
     return rows
 
 
@@ -42,9 +53,14 @@ def sample_std(x: np.ndarray) -> float:
 
 def main(sweep: Path, dest: Path) -> None:
     report.main([str(sweep)])
-    rows = copy_finished_runs(sweep, dest, lambda summary, config: summary["env"])
+    copy_finished_runs(sweep, dest, lambda summary, config: summary["env"])
     for name in ("sweep_report.png", "sweep_report.md", "sweep_report.csv"):
         shutil.copy(sweep / name, dest / name)
+    (dest / "table.md").write_text(table(recorded_runs(dest)))
+    print(table(recorded_runs(dest)), end="")
+
+
+def table(rows: dict) -> str:
     # "best periodic eval": the highest of a run's deterministic evals (eval.episodes each, eval.final_episodes at the end), the kind of
     # figure Tianshou's tables give (the max over training), from far fewer evals than theirs.
     lines = ["| env | seeds | frames | train return, last 100 (mean +- sample std) | per seed | deterministic eval (mean +- sample std) | best periodic eval (mean +- sample std) | SPS per run | wall s per run |",
@@ -59,9 +75,11 @@ def main(sweep: Path, dest: Path) -> None:
                      f"{evals.mean():.0f} +- {sample_std(evals):.0f} | {best.mean():.0f} +- {sample_std(best):.0f} | "
                      f"{np.mean([s['sps'] for s in runs]):.0f} | "
                      f"{np.mean([s['wall_s'] for s in runs]):.0f} |")
-    (dest / "table.md").write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    return "\n".join(lines) + "\n"
 
 
 if __name__ == "__main__":
-    main(Path(sys.argv[1]), Path(sys.argv[2]))
+    if sys.argv[1] == "--table":
+        print(table(recorded_runs(Path(sys.argv[2]))), end="")
+    else:
+        main(Path(sys.argv[1]), Path(sys.argv[2]))

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ppo_torchrl.records import has_record, open_record, read_record_text
 from ppo_torchrl.report import read_metrics
 
 SWING_S = 0.5  # the trot's longest swing while moving
@@ -33,8 +34,9 @@ def mean_std(values) -> str:
 
 def load(seed_dir: Path, sweep: str) -> dict:
     """{height: that height's eval result with 'episodes_rows' (the per-episode CSV rows) added}."""
-    result = json.loads((seed_dir / sweep / "height_sweep.json").read_text())
-    episodes = list(csv.DictReader(open(seed_dir / sweep / "height_sweep_episodes.csv")))
+    result = json.loads(read_record_text(seed_dir / sweep / "height_sweep.json"))
+    with open_record(seed_dir / sweep / "height_sweep_episodes.csv", newline="") as f:
+        episodes = list(csv.DictReader(f))
     by_height = {}
     for h in result["heights"]:
         height = round(h["step_height_m"], 4)
@@ -115,7 +117,7 @@ def curves(seed_dirs, out: Path) -> None:
     fig, axes = plt.subplots(2, 2, figsize=(13, 8), constrained_layout=True)
     stage_ends = set()  # where a seed's second stage starts: a dotted line
     for d in seed_dirs:
-        stages = [read_metrics(p) for p in (d / "stage1" / "metrics.csv", d / "metrics.csv") if p.is_file()]
+        stages = [read_metrics(p) for p in (d / "stage1" / "metrics.csv", d / "metrics.csv") if has_record(p)]
         starts = np.cumsum([0.0] + [m["frames"][-1] for m in stages[:-1]])
         stage_ends.update(starts[1:])
         x = np.concatenate([start + np.asarray(m["frames"]) for start, m in zip(starts, stages)])

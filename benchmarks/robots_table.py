@@ -20,6 +20,7 @@ from pathlib import Path
 from omegaconf import OmegaConf
 from robot_row import SHARE, STRIDE_HZ, SWING_S, load, long_swings
 
+from ppo_torchrl.envs import resolve_model_file
 from ppo_torchrl.robots.model import GRAVITY, read_robot
 
 FLAT_GOAL, SPEED_GOAL, STEP = 0.95, 0.25, 0.25  # flat success, flat speed in sqrt(g l), the step in l
@@ -28,7 +29,7 @@ TUNING_GOAL = {"go1": 0.9, "anymal_b": 0.9}
 
 def robot_of(run_dir: Path):
     cfg = OmegaConf.load(run_dir / ".hydra" / "config.yaml")
-    return read_robot(cfg.env.xml_file, cfg.env.legged.keyframe)
+    return read_robot(resolve_model_file(cfg.env.xml_file), cfg.env.legged.keyframe)
 
 
 def in_legs(sweep: dict, l: float) -> dict:

@@ -8,6 +8,8 @@ import argparse
 import csv
 from pathlib import Path
 
+from ppo_torchrl.records import open_record
+
 WALL_CLOCK = {"time_s", "sps"}
 
 
@@ -17,8 +19,8 @@ def main() -> None:
     parser.add_argument("b", type=Path)
     parser.add_argument("--tolerance", type=float, default=0.0, help="relative; 0: the printed values must be equal")
     args = parser.parse_args()
-    rows_a = list(csv.DictReader((args.a / "metrics.csv").open()))
-    rows_b = list(csv.DictReader((args.b / "metrics.csv").open()))
+    rows_a = list(csv.DictReader(open_record(args.a / "metrics.csv", newline="")))
+    rows_b = list(csv.DictReader(open_record(args.b / "metrics.csv", newline="")))
     columns = [c for c in rows_a[0] if c not in WALL_CLOCK and c in rows_b[0]]
     differ = []
     for ra, rb in zip(rows_a, rows_b):

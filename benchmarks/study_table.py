@@ -44,12 +44,13 @@ def plot(found: list, expected_seeds: int, png: Path) -> None:
     import matplotlib.pyplot as plt
     import numpy as np
 
+    from ppo_torchrl.records import has_record
     from ppo_torchrl.report import read_metrics
 
     fig, ax = plt.subplots(figsize=(10, 6), constrained_layout=True)
     for i, r in enumerate(found, 1):
         files = [r["dir"] / f"seed{seed}" / "metrics.csv" for seed in r["seeds"]]
-        curves = [read_metrics(f) for f in files if f.is_file()]
+        curves = [read_metrics(f) for f in files if has_record(f)]
         if not curves:
             print(f"no curve for {r['sweep']} / {r['trial']}: its seeds' metrics.csv are gone")
             continue

@@ -13,11 +13,13 @@ from pathlib import Path
 
 import yaml
 
+from ppo_torchrl.envs import resolve_model_file
+from ppo_torchrl.records import open_record
 from ppo_torchrl.robots.model import read_robot
 
 
 def rows(run: Path) -> list:
-    with open(run / "metrics.csv") as f:
+    with open_record(run / "metrics.csv", newline="") as f:
         return list(csv.DictReader(f))
 
 
@@ -33,7 +35,7 @@ def main(argv: list) -> None:
         overrides = [o for o in yaml.safe_load((run / ".hydra" / "overrides.yaml").read_text())
                      if not o.split("=")[0] in ("experiment", "env.xml_file", "seed", "logger")]
         config = yaml.safe_load((run / "config.yaml").read_text())
-        leg = read_robot(config["env"]["xml_file"]).leg_length
+        leg = read_robot(resolve_model_file(config["env"]["xml_file"])).leg_length
         evals = [f"{int(r['frames']) / 1e6:.0f}M {float(r['eval/success_rate']):.0%} / {float(r['eval/forward_velocity']):.2f}"
                  for r in table if r["eval/return_mean"]]
         levels, mark = [], 1_000_000

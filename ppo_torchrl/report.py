@@ -17,10 +17,12 @@ from __future__ import annotations
 
 import csv
 import io
+import lzma
 from pathlib import Path
 from typing import Dict, List
 
 from ppo_torchrl.errors import ConfigError
+from ppo_torchrl.records import has_record, open_record
 from ppo_torchrl.rundir import atomic_write_bytes, check_replaceable, is_run, record, unwritable
 
 PANELS = [
@@ -42,9 +44,9 @@ def read_metrics(path: Path, required=("frames",)) -> Dict[str, List[float]]:
     damaged = (f"{path} is damaged (a row that is not numbers); restore it, or delete the damaged rows, and run "
                "the report again")
     try:
-        with open(path, newline="") as f:
+        with open_record(path, newline="") as f:
             rows = list(csv.DictReader(f))
-    except (UnicodeDecodeError, csv.Error):
+    except (UnicodeDecodeError, csv.Error, lzma.LZMAError, EOFError):
         raise ConfigError(f"{path} is not a metrics table (not CSV text); restore it from the run, or report another "
                           "run") from None
     if not rows:
@@ -86,7 +88,7 @@ def run_figure(run_dir: Path):
     import numpy as np
 
     metrics_path = Path(run_dir) / "metrics.csv"
-    if not metrics_path.is_file():
+    if not has_record(metrics_path):
         raise ConfigError(f"{run_dir} is not a ppo_torchrl run dir (no metrics.csv)")
     m = read_metrics(metrics_path, RUN_COLUMNS)
     frames = np.asarray(m["frames"])
@@ -259,7 +261,7 @@ def main(argv: List[str]) -> List[Path]:
     why = unwritable(target)
     if why:
         raise ConfigError(f"cannot write the report into {target}: {why}; copy the dir somewhere writable and run it there")
-    if (target / "metrics.csv").is_file():
+    if has_record(target / "metrics.csv"):
         check_replaceable(target, [target / "report.png"])  # a report.png the app did not write is left alone
         outputs = [plot_run(target)]
     elif (target / "multirun.yaml").is_file() or any(target.glob("*/.hydra")) or (target / "trial.json").is_file():

@@ -1,0 +1,79 @@
+"""Records as `results/` keeps them: a run's text tables may be stored xz-compressed under their name plus `.xz`.
+
+A 10M-frame run's `metrics.csv` is ~1 MB of text and ~0.3 MB as `metrics.csv.xz` (the stdlib's lzma, `xzcat` reads
+it too); `results/README.md` says which records are kept that way. Every reader of a record (report, the table
+scripts in benchmarks/) opens it through `open_record`, which takes the plain file when there is one and the
+`.xz` one otherwise, so a run dir under `outputs/` and its record under `results/` read the same.
+`compress` writes the `.xz` beside a plain file and leaves the plain one as it is (records.main: the command).
+"""
+
+from __future__ import annotations
+
+import io
+import lzma
+import sys
+from pathlib import Path
+from typing import IO, Union
+
+SUFFIX = ".xz"
+
+
+def record_path(path: Union[str, Path]) -> Path:
+    """`path` when it is a file, else its `.xz` twin when that is one, else `path` (a reader's error names it)."""
+    path = Path(path)
+    packed = path.with_name(path.name + SUFFIX)
+    return packed if not path.is_file() and packed.is_file() else path
+
+
+def has_record(path: Union[str, Path]) -> bool:
+    return record_path(path).is_file()
+
+
+def open_record(path: Union[str, Path], newline: str = None) -> IO[str]:
+    """A text handle on the record (plain or xz-compressed), as `open(path, newline=newline)` gives one."""
+    found = record_path(path)
+    if found.name.endswith(SUFFIX) and not Path(path).name.endswith(SUFFIX):
+        return io.TextIOWrapper(lzma.open(found, "rb"), encoding="utf-8", newline=newline)
+    return open(found, newline=newline, encoding="utf-8")
+
+
+def read_record_text(path: Union[str, Path]) -> str:
+    with open_record(path) as f:
+        return f.read()
+
+
+def compress(path: Union[str, Path]) -> Path:
+    """Write `<path>.xz` (xz -9, no timestamps: the same bytes from the same text) beside `path`, which stays."""
+    path = Path(path)
+    out = path.with_name(path.name + SUFFIX)
+    data = lzma.compress(path.read_bytes(), preset=9 | lzma.PRESET_EXTREME)
+    if out.exists():
+        if out.is_file() and lzma.decompress(out.read_bytes()) == path.read_bytes():
+            return out  # already this record
+        raise FileExistsError(f"{out} exists and holds another text; move it away first")
+    tmp = out.with_name(out.name + ".tmp")
+    tmp.write_bytes(data)
+    tmp.replace(out)
+    return out
+
+
+def main(argv: list) -> int:
+    """python -m ppo_torchrl.records FILE [...]: each FILE's `.xz` record beside it (the plain file stays)."""
+    if not argv or any(a.startswith("-") for a in argv):
+        print("usage: python -m ppo_torchrl.records FILE [...]  (writes FILE.xz beside each; FILE stays)", file=sys.stderr)
+        return 2
+    missing = [a for a in argv if not Path(a).is_file()]
+    if missing:
+        print(f"error: {missing[0]} is not a file", file=sys.stderr)
+        return 2
+    for a in argv:
+        try:
+            print(f"wrote {compress(a)}")
+        except FileExistsError as e:
+            print(f"error: {e}", file=sys.stderr)
+            return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
