@@ -3,7 +3,7 @@ every combination of -1, 0 and +1 actions on one leg's three joints (targets rea
 standing pose; MuJoCo's kinematics only, no dynamics), the largest rise of that leg's foot above its standing
 height, in m and leg lengths, beside the step of 0.25 l (issue 46's tuning).
 
-    python benchmarks/foot_reach.py ../shared/robots/unitree_go1/scene.xml [env.legged.saturation_cap=true ...]
+    python benchmarks/foot_reach.py ppo_torchrl/assets/menagerie/unitree_go1/scene.xml [env.legged.saturation_cap=true ...]
 """
 
 from __future__ import annotations

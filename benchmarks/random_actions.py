@@ -3,7 +3,7 @@
 + policy.std_min), the curriculum off (a flat start). A quick read of how hard the recipe's action range and
 exploration make a robot to explore, before any training (issue 46's tuning).
 
-    python benchmarks/random_actions.py ../shared/robots/unitree_go1/scene.xml [--episodes 20] [env.legged.action_scale=0.25 ...]
+    python benchmarks/random_actions.py ppo_torchrl/assets/menagerie/unitree_go1/scene.xml [--episodes 20] [env.legged.action_scale=0.25 ...]
 
 Falls are chaotic: 20 episodes move by ~+-15 control steps with the noise's std in the third digit; use 100+
 to compare two settings.

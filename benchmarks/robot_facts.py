@@ -1,7 +1,7 @@
 """What env=legged reads from each robot's model and what the recipe asks of it (the start line's second
 line), for any model files:
 
-    python benchmarks/robot_facts.py ../shared/robots/*/scene.xml > results/robots/legged_read_<date>/robots.txt
+    python benchmarks/robot_facts.py ppo_torchrl/assets/menagerie/*/scene.xml > results/robots/legged_read_<date>/robots.txt
 """
 
 import sys

@@ -87,12 +87,16 @@ def env_label(env_cfg) -> str:
 
 
 def resolve_model_file(xml_file: str) -> Path:
-    """A path as given (absolute or from the working dir), else a model shipped in assets/."""
+    """A path as given (absolute or from the working dir), else a model shipped in assets/ (`menagerie/unitree_go1/
+    scene.xml`), else the shipped Menagerie model of the path's last folder and file name."""
     path = Path(xml_file).expanduser()
     if path.is_file():
         return path.resolve()
     if (ASSETS_DIR / xml_file).is_file():
         return ASSETS_DIR / xml_file
+    moved = ASSETS_DIR / "menagerie" / path.parent.name / path.name
+    if path.parent.name and moved.is_file():  # a run recorded before the Menagerie robots came into the package,
+        return moved  # e.g. .../shared/robots/unitree_go1/scene.xml: the same file (results/README.md)
     shipped = ", ".join(sorted(p.name for p in ASSETS_DIR.glob("*.xml")))
     raise ConfigError(f"env.xml_file={xml_file}: no such file (a path, or a shipped model: {shipped})")
 

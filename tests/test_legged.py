@@ -1,5 +1,5 @@
 """Issue 46: a robot read from its model (env=legged, ppo_torchrl/robots/). The six MuJoCo Menagerie
-quadrupeds in ../shared/robots (their README gives the figures checked here), real file layouts, bad
+quadrupeds in ppo_torchrl/assets/menagerie (their README gives the figures checked here), real file layouts, bad
 robots as one line, the step added to any model. No training."""
 
 from __future__ import annotations
@@ -17,10 +17,9 @@ import pytest
 
 from ppo_torchrl.errors import ConfigError
 
-ROBOTS_DIR = Path(__file__).resolve().parents[2] / "shared" / "robots"
-needs_robots = pytest.mark.skipif(not ROBOTS_DIR.is_dir(), reason=f"no {ROBOTS_DIR} (the shared Menagerie robots)")
+ROBOTS_DIR = Path(__file__).resolve().parents[1] / "ppo_torchrl" / "assets" / "menagerie"
 
-# ../shared/robots/README.md: name, mass kg, home trunk z m, leg (thigh + shank) m, drive, heading, each corner's
+# ppo_torchrl/assets/menagerie/README.md: name, mass kg, home trunk z m, leg (thigh + shank) m, drive, heading, each corner's
 # foot (a geom name, or the body of an unnamed foot sphere)
 FACTS = {
     "unitree_go1": ("go1", 12.743, 0.27, 0.426, "position", (1, 0), {"LF": "FL", "RF": "FR", "LH": "RL", "RH": "RR"}),
@@ -41,7 +40,6 @@ def scene(folder: str) -> Path:
     return ROBOTS_DIR / folder / "scene.xml"
 
 
-@needs_robots
 @pytest.mark.parametrize("folder", sorted(FACTS))
 def test_each_menagerie_robot_is_read_from_its_model_as_its_readme_gives_it(folder):
     from ppo_torchrl.robots.model import read_robot
@@ -63,7 +61,6 @@ def test_each_menagerie_robot_is_read_from_its_model_as_its_readme_gives_it(fold
     assert robot.keyframe == (None if folder == "anybotics_anymal_b" else "home")
 
 
-@needs_robots
 @pytest.mark.parametrize("folder", sorted(FACTS))
 def test_each_robot_stands_for_two_seconds_at_its_derived_pose_under_its_derived_drives(folder):
     """The env's own start (no reset noise) and drives (action 0 holds the standing pose): the trunk stays
@@ -90,7 +87,6 @@ def test_each_robot_stands_for_two_seconds_at_its_derived_pose_under_its_derived
     env.close()
 
 
-@needs_robots
 def test_a_full_action_moves_a_joint_no_further_than_its_servo_saturates():
     """env.legged.action_scale (0.5 rad) is the most; a servo that reaches its peak torque sooner (peak / kp, from
     the model) gets that angle: Go1 23.7 / 100 (hips) and 35.55 / 100 (knees), ANYmal B 40 / 100, Go2's torque
@@ -108,7 +104,6 @@ def test_a_full_action_moves_a_joint_no_further_than_its_servo_saturates():
     assert robot._ctrl_per_action == pytest.approx([0.1] * 12)  # the most, where the servos saturate later
 
 
-@needs_robots
 def test_the_legged_recipe_moves_every_joint_by_the_action_scale_and_explores_gently():
     """experiment=legged_trot turns the saturation cap off (under it a Go1 foot could rise only 0.24 l, under the
     step of 0.25 l) and starts its policy at std 0.4; its start line says so. A saved run without the key keeps the
@@ -132,7 +127,6 @@ def test_the_legged_recipe_moves_every_joint_by_the_action_scale_and_explores_ge
     assert OmegaConf.select(cfg, "env.terrain.flat_share") == 0.2
 
 
-@needs_robots
 def test_eval_measures_joint_torque_against_the_models_own_limits():
     """Standing (action 0) a Go1's servos hold well under their force range; driven to the ends of the action
     range they saturate: the peak share reaches 1.0 (the model's limit, not more) and the time at it shows."""
@@ -154,7 +148,6 @@ def test_eval_measures_joint_torque_against_the_models_own_limits():
     assert figures["driven"]["torque_at_limit_share"] > 0.0
 
 
-@needs_robots
 def test_torque_motors_become_pd_servos_around_the_standing_pose_with_gains_from_the_model():
     """Go2's torque motors: kp = peak torque / 0.3 rad, kd = 2 sqrt(kp I); used as Menagerie ships them (its
     keyframe's ctrl, angles, sent as torques) the robot collapses to 0.077 m (the robots' README)."""
@@ -175,7 +168,6 @@ def test_torque_motors_become_pd_servos_around_the_standing_pose_with_gains_from
     assert env.ctrl_of(np.ones(12))[a] == pytest.approx(-1.8 + PD_SATURATION_RAD)  # a full action: where it saturates
 
 
-@needs_robots
 def test_the_step_is_added_to_a_model_that_has_none_at_a_quarter_leg_length_and_faces_the_heading():
     """ANYmal B faces -x: its step (0.25 l = 14.7 cm in evaluation) lies ahead of it, made by MjSpec at build
     time; the model file is not touched."""
@@ -329,9 +321,8 @@ def test_a_legged_run_is_named_by_its_model_and_says_what_was_read(tmp_path):
     assert exit_.value.code == 2 and not (tmp_path / "bad").exists()
 
 
-@needs_robots
 def test_a_filmed_robot_whose_visual_meshes_were_left_out_is_drawn():
-    """The shared Menagerie robots keep their collision geoms in group 3, which MuJoCo does not draw: a video of
+    """The Menagerie robots keep their collision geoms in group 3, which MuJoCo does not draw: a video of
     one showed an empty floor. A rendered env draws them (in its own copy: a training env keeps the model's
     groups), and the frame has the robot in it: grey pixels that are not there when its geoms stay hidden."""
     from ppo_torchrl.compose import compose
@@ -354,7 +345,6 @@ def test_a_filmed_robot_whose_visual_meshes_were_left_out_is_drawn():
     assert grey.sum() > 100 and grey_hidden.sum() < grey.sum() / 10, (grey.sum(), grey_hidden.sum())
 
 
-@needs_robots
 def test_a_step_of_height_zero_is_not_drawn():
     """Flat ground is the step at height 0, its top in the floor's plane: filmed, the two flickered as dark
     patches. Such a step is transparent (MuJoCo does not draw it) and the same box, raised, is drawn again;
@@ -380,7 +370,6 @@ def test_a_step_of_height_zero_is_not_drawn():
     assert np.abs(frame(0.1, env.model_step[1]) - flat).max() > 8 and env.model.geom_rgba[step, 3] == 1.0
 
 
-@needs_robots
 def test_unnamed_feet_go_by_their_corner_in_evals():
     """ANYmal B's and A1's foot spheres have no name: the gait line and the sweep's columns call them by their
     corner (they said 'foot 0'..'foot 3'); named feet keep their names."""
