@@ -17,8 +17,8 @@ from pathlib import Path
 from ppo_torchrl import signals
 from ppo_torchrl.errors import EXIT_SIGNAL, guarded, signal_in_chain
 from ppo_torchrl.compose import CONF_DIR, compose, hydra_value, register_resolvers, show_job
-from ppo_torchrl.overrides import (HELP_FLAGS, INFO_FLAGS, check_env_override, route_paths, split_args, unquote,
-                                   whole_counts, with_override)
+from ppo_torchrl.overrides import (HELP_FLAGS, INFO_FLAGS, check_env_override, check_values, route_paths,
+                                   split_args, unquote, whole_counts, with_override)
 from ppo_torchrl.resume import check_resume
 from ppo_torchrl.sweeps import (SWEEP, announce_study, dry_run, fail_running_trials, hydra_overrides, job_dirs,
                                 objective, run_seeds, stored_study, sweep_done, sweep_jobs)
@@ -71,6 +71,7 @@ def prepare(argv: list[str]) -> list[str]:
     flags, overrides = split_args(argv)
     if any(f in HELP_FLAGS for f in flags):
         return argv
+    check_values(overrides)  # resume= with an empty value, ~seed: one line, before anything else
     resume = next((unquote(o.split("=", 1)[1]) for o in overrides if o.startswith("resume=")), None)
     argv, overrides = route_paths(argv), route_paths(overrides)
     check_env_override(overrides)

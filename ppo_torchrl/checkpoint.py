@@ -3,7 +3,8 @@
 A checkpoint holds everything a resume or an evaluation needs: actor, critic, optimizer,
 normalization statistics, frame and iteration counters, RNG states and the resolved config.
 Writes go to a temporary file that is renamed over the target, so a process killed mid-write
-leaves the previous checkpoint intact.
+leaves the previous checkpoint intact. Reads build data only (safe_pickle): a file that asks for anything else
+(a crafted pickle's `os.system`) is refused in one line before any of it runs.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import torch
 
 from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.rundir import atomic_write_bytes
+from ppo_torchrl.safe_pickle import load_torch, refused_name
 
 LAST = "last.pt"
 BEST = "best.pt"
@@ -34,12 +36,25 @@ def load(path: Path | str) -> dict:
     path = Path(path)
     if not path.is_file():
         raise ConfigError(f"checkpoint '{path}' does not exist")
+    from ppo_torchrl.env_state import check_packed  # torchrl's import, only when a checkpoint is read
+
     try:
-        state = torch.load(path, map_location="cpu", weights_only=False)
-    except Exception as exc:  # a truncated or foreign file: say so in one line
+        state = load_torch(path)  # tensors, numbers, strings, numpy arrays, plain containers: nothing runs
+        check_packed(state)  # the env state inside (env_state.pack's pickled bytes): data only as well
+    except Exception as exc:  # a crafted, truncated or foreign file: say so in one line
+        asked = refused_name(exc)
+        if asked is not None:
+            raise ConfigError(f"checkpoint '{path}' is not safe to load: it asks for {asked}, and a ppo_torchrl "
+                              "checkpoint holds only tensors, numbers, strings, numpy arrays and plain containers; "
+                              "nothing of it was run") from None
         raise ConfigError(f"checkpoint '{path}' is corrupt or not a ppo_torchrl checkpoint ({type(exc).__name__})") from exc
     if not isinstance(state, dict) or "actor" not in state or "frames" not in state:
         raise ConfigError(f"checkpoint '{path}' is not a ppo_torchrl checkpoint (no actor weights or frame count)")
+    for key in ("frames", "iteration"):  # a count below 0 (an edited or damaged file) would resume at frame -4,096
+        count = state.get(key, 0)
+        if isinstance(count, bool) or not hasattr(count, "__index__") or count < 0:
+            raise ConfigError(f"checkpoint '{path}' is damaged: its {key} count is {count!r}, not a count >= 0; use "
+                              "another checkpoint of the run (checkpoints/frames_<N>.pt, best.pt)")
     return state
 
 

@@ -71,7 +71,8 @@ def unknown_key_hint(exc: BaseException, overrides: list[str]) -> str:
     found = re.search(r"override '([^']+)'", str(exc)) or re.search(r"Key '([^']+)' (?:is )?not in", str(exc))
     if not found:
         return ""
-    groups = [o for o in overrides if "=" in o and "." not in o.partition("=")[0] and "/" not in o]
+    groups = [o for o in overrides if "=" in o and "." not in o.partition("=")[0] and "/" not in o
+              and o.partition("=")[0].lstrip("+~") != found.group(1)]  # total_timesteps=1e6 is no group's choice
     if groups == overrides:  # the groups alone failed: nothing to compare the key with
         return ""
     try:

@@ -22,6 +22,7 @@ and every scale uses:
 TorchRL carries the snapshot as this transform's extra state, so any TorchRL collector's `state_dict()`
 (one process, `MultiSyncCollector`, `RayCollector`) holds it in one entry, pickled into one `bytes` value:
 TorchRL's workers turn state dicts into TensorDicts, where RNG states and Python floats would not survive.
+That value is inside checkpoints too, so `unpack` reads it with safe_pickle's restricted unpickler (data only).
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ from torchrl.envs.transforms import Transform
 
 from ppo_torchrl.normalization import ObservationNormalizer, RewardNormalizer, pooled
 from ppo_torchrl.positions import ResumableReset
+from ppo_torchrl.safe_pickle import loads as data_loads
 
 EPISODE_KEYS = ("episode_reward", "step_count")
 PACKED = "packed"
@@ -173,7 +175,7 @@ def unpack(state) -> Optional[dict]:
         return None
     if isinstance(packed, torch.Tensor):  # bytes that travelled as a uint8 tensor
         packed = packed.numpy().tobytes()
-    return pickle.loads(packed)
+    return data_loads(packed)  # data only: a crafted state is refused (safe_pickle.Refused), never run
 
 
 def pack(state: dict) -> dict:
@@ -181,6 +183,20 @@ def pack(state: dict) -> dict:
     into a TensorDict and send each tensor through shared memory, ~2 ms apiece and ~20 ms a round trip for a
     dozen (RNG states and Python floats would not survive it); one `bytes` entry stays one plain message."""
     return {PACKED: pickle.dumps(state)}
+
+
+def check_packed(tree) -> None:
+    """Read every packed state in `tree` (a loaded checkpoint), nested ones too, so that a crafted one is refused
+    (safe_pickle.Refused) when its file is loaded, not later in a worker."""
+    if isinstance(tree, dict):
+        packed = tree.get(PACKED)
+        if isinstance(packed, (bytes, torch.Tensor)):
+            check_packed(unpack(tree))
+        for value in tree.values():
+            check_packed(value)
+    elif isinstance(tree, (list, tuple)):
+        for value in tree:
+            check_packed(value)
 
 
 def env_state_of(env) -> EnvState:

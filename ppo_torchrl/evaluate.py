@@ -307,6 +307,10 @@ def apply_overrides(cfg, overrides: list[str]):
     return cfg
 
 
+MAX_EPISODES = 10**6
+MAX_STEP_M, MAX_STEP_LEGS = 2.0, 4.0  # a step no robot here can meet, let alone climb: a typo (heights=1e9)
+
+
 def parse_heights(text: str) -> list[tuple]:
     """heights=0,0.05,0.1 (m) or, for env=legged, in leg lengths: 0,0.2l,0.25l,0.3l. [(value, in leg lengths)]."""
     example = "e.g. 0,0.05,0.1,0.15,0.2 (m) or, for env=legged, 0,0.2l,0.25l,0.3l (leg lengths)"
@@ -317,6 +321,10 @@ def parse_heights(text: str) -> list[tuple]:
         raise ConfigError(f"heights={text}: expected step heights separated by commas, {example}") from None
     if not heights or any(not (h >= 0 and math.isfinite(h)) for h, _ in heights):
         raise ConfigError(f"heights={text}: expected step heights >= 0 separated by commas, {example}")
+    tall = next((h for h, legs in heights if h > (MAX_STEP_LEGS if legs else MAX_STEP_M)), None)
+    if tall is not None:
+        raise ConfigError(f"heights={text}: a step of {tall:g} is taller than any robot here can meet (at most "
+                          f"{MAX_STEP_M:g} m, or {MAX_STEP_LEGS:g}l in leg lengths); {example}")
     return heights
 
 
@@ -416,8 +424,8 @@ def main(argv: list[str]) -> dict:
     from ppo_torchrl.checkpoint import label as checkpoint_label
     from ppo_torchrl.cli import parse_args, resolve_run
     from ppo_torchrl.envs import env_spec
-    from ppo_torchrl.rundir import (atomic_write_json, check_replaceable, intend, is_run, output_dir_for, record,
-                                    unwritable)
+    from ppo_torchrl.ownership import holder
+    from ppo_torchrl.rundir import atomic_write_json, check_replaceable, intend, output_dir_for, record, unwritable
 
     usage = ("python -m ppo_torchrl.evaluate run=<run dir> [checkpoint=best|last|<file>] [episodes=10] [video=false] "
              "[video_episodes=0] [video_length=<s>] [seed=0] [heights=<m,m,...> [out=<dir>]] [env.<key>=<value> ...]")
@@ -447,6 +455,9 @@ def main(argv: list[str]) -> dict:
                        "video_length": "", "seed": 0, "heights": "", "out": ""}, usage, help, about)
     if args["episodes"] < 1:
         raise ConfigError(f"episodes={args['episodes']} must be >= 1")
+    if args["episodes"] > MAX_EPISODES:
+        raise ConfigError(f"episodes={args['episodes']} must be at most {MAX_EPISODES:,} (a million episodes of a "
+                          "thousand steps run for days)")
     if not 0 <= args["seed"] * 1000 + args["episodes"] < 2**32:  # episode i's seed is seed * 1000 + i (32-bit)
         raise ConfigError(f"seed={args['seed']} must be in 0..{(2**32 - args['episodes']) // 1000}: episode i starts "
                           "from seed * 1000 + i")
@@ -467,8 +478,9 @@ def main(argv: list[str]) -> dict:
     writes = [out_dir / name for name in SWEEP_FILES] if heights else [out_dir / "eval.json"] + [video] * args["video"]
     check_replaceable(run_dir, writes)  # a file there that the app did not write is left alone: one line
     cfg, ac, state = load_policy(run_dir, str(checkpoint))
-    if not args["out"]:
-        check_same_env(run_dir, cfg, args["checkpoint"])
+    filed_in = holder(writes[0]) or (None if args["out"] else run_dir)  # the run whose dir gets the results
+    if filed_in is not None:
+        check_same_env(filed_in, cfg, args["checkpoint"])
     if overrides:
         cfg = apply_overrides(cfg, overrides)
         check_spec(state, env_spec(cfg.env), cfg.env.id)
@@ -480,8 +492,7 @@ def main(argv: list[str]) -> dict:
                             f"{run_dir.resolve().name}\n{label}", owner=run_dir)
         print(f"{label}: height sweep over {args['episodes']} episodes per height: "
               f"{out_dir / SWEEP_FILES[0]}, {out_dir / SWEEP_FILES[1]}")
-        if is_run(run_dir):
-            record(run_dir, writes)
+        record(run_dir, writes)  # in the run dir that holds them, however out= spells it
         return {"heights": rows}
     if args["video"]:
         intend(run_dir, [video])  # imageio writes the mp4 in place: listed first, a cut one is the app's
@@ -491,8 +502,7 @@ def main(argv: list[str]) -> dict:
     result.update(env=env_label(cfg.env), checkpoint=which, checkpoint_frames=state["frames"],
                   episodes=args["episodes"], video=result.get("video"), overrides=overrides)
     atomic_write_json(out_dir / "eval.json", result, owner=run_dir)
-    if is_run(run_dir):
-        record(run_dir, writes)
+    record(run_dir, writes)
     print(f"{label}: return {result['return_mean']:.1f} +- "
           f"{result['return_std']:.1f}, length {result['length_mean']:.0f} +- {result['length_std']:.0f} "
           f"over {args['episodes']} episodes" + motion_line(result) + ("\n  " + video_line(result["video"])

@@ -7,6 +7,7 @@ reports, sweeps and resume read it. The `logger` group adds an external logger o
 from __future__ import annotations
 
 import csv
+import io
 import math
 import sys
 import time
@@ -149,6 +150,28 @@ def truncate_logs(run_dir: Path, frames: int) -> None:
     for scalars in csv_logger_files(run_dir):
         kept = "".join(l for l in scalars.read_text().splitlines(keepends=True) if int(l.split(",")[0]) <= frames)
         atomic_write_bytes(scalars, lambda f, kept=kept: f.write(kept.encode()))
+
+
+def amend_last_row(path: Path, frames: int, values: Dict[str, float]) -> bool:
+    """Fill `values` into the row of metrics.csv logged at `frames` (the last): the final eval of a run that
+    resume= finishes joins its last iteration's row. The file is replaced whole (a kill: the old or the new).
+    False when the last row is not at `frames` (nothing written)."""
+    from ppo_torchrl.rundir import atomic_write_bytes
+
+    if not Path(path).exists():
+        return False
+    with open(path, newline="") as f:
+        rows = list(csv.reader(f))
+    if len(rows) < 2 or "frames" not in rows[0] or rows[-1][rows[0].index("frames")] != str(frames):
+        return False
+    header = rows[0]
+    for key, value in values.items():
+        if key in header and len(rows[-1]) == len(header):
+            rows[-1][header.index(key)] = _fmt(value)
+    text = io.StringIO(newline="")
+    csv.writer(text).writerows(rows)
+    atomic_write_bytes(Path(path), lambda f: f.write(text.getvalue().encode()))
+    return True
 
 
 class Progress:

@@ -22,8 +22,9 @@ VALUE_FLAGS = ("--cfg", "-c", "--package", "-p", "--config-path", "-cp", "--conf
 INFO_VALUES = ("all", "config", "defaults", "defaults-tree", "plugins", "searchpath")
 RUN_FLAGS = ("-m", "--multirun", "--run", "-r")
 # Other tools' argument names and this app's key for them (SB3 / rl-zoo / CleanRL).
-HABITS = {"env_id": "env", "algo": "loss", "total_timesteps": "collector.total_frames", "n_timesteps":
-          "collector.total_frames", "num_envs": "collector.num_envs", "n_envs": "collector.num_envs",
+# (No `algo`: this app is PPO; `--algo ppo` is answered by ALGO, never with another algorithm's loss.)
+HABITS = {"env_id": "env", "total_timesteps": "collector.total_frames", "n_timesteps": "collector.total_frames",
+          "total_frames": "collector.total_frames", "num_envs": "collector.num_envs", "n_envs": "collector.num_envs",
           "learning_rate": "optim.lr", "n_steps": "collector.frames_per_batch", "n_epochs": "loss.epochs",
           "update_epochs": "loss.epochs", "batch_size": "loss.minibatch_size", "gamma": "advantage.gamma",
           "gae_lambda": "advantage.lmbda", "ent_coef": "loss.entropy_coef", "clip_range": "loss.clip_epsilon",
@@ -47,6 +48,8 @@ def split_args(argv: list[str]) -> tuple[list[str], list[str]]:
             if not value and following is not None and "=" not in following and not following.startswith("-"):
                 value = following
             name = key.replace("-", "_")
+            if name == "algo":
+                raise ConfigError(f"{arg}{' ' + following if value == following else ''}: {algo_line()}")
             example = f"{HABITS.get(name, name)}={value or '<value>'}"
             raise ConfigError(f"{arg}{' ' + following if value == following else ''}: the app takes key=value "
                               f"overrides, not --key value; write {example} (python -m ppo_torchrl --help lists them)")
@@ -56,6 +59,53 @@ def split_args(argv: list[str]) -> tuple[list[str], list[str]]:
             overrides.append(arg)
         i += 2 if arg.startswith("-") and takes_value else 1
     return flags, overrides
+
+
+EMPTY_MEANS = {"resume": "a new run would start", "init_from": "the run would train from scratch",
+               "hydra.run.dir": "the run would go to the working dir", "hydra.sweep.dir": "the sweep would go to "
+               "the working dir"}
+
+
+def check_values(overrides: list[str]) -> None:
+    """What Hydra would take without a word: a path key with nothing after '=' (an unset shell variable,
+    `resume=$RUN`) and `~key`, which deletes a key the app reads (Hydra's `~` is for defaults lists)."""
+    for arg in overrides:
+        key, sep, value = arg.partition("=")
+        if sep and key.lstrip("+") in PATH_KEYS and not unquote(value).strip():
+            name = key.lstrip("+")
+            what = "<run dir>" if name == "resume" else "<run dir or checkpoint>" if name == "init_from" else "<dir>"
+            raise ConfigError(f"{arg}: the value is empty (an unset shell variable?) and {EMPTY_MEANS[name]}; "
+                              f"give {name}={what}, or leave {name}= out")
+        if key.startswith("~") and not key.lstrip("~").startswith(("hydra.", "hydra/")):
+            name = key.lstrip("~")
+            raise ConfigError(f"{arg}: '~' deletes {name}, which the app reads; set it instead ({name}=<value>), or "
+                              "leave it out for its default (python -m ppo_torchrl --cfg job shows them)")
+
+
+def algo_line() -> str:
+    """What `--algo ppo` (SB3's, rl-zoo's word) is told: there is no algorithm to choose, only PPO's loss."""
+    from ppo_torchrl.losses import LOSSES
+
+    return ("this app is PPO already (clipped PPO: the default loss=clip_ppo), there is no algorithm to choose; "
+            f"loss= picks the loss, one of {', '.join(LOSSES)} (loss=ppo is PPO without clipping)")
+
+
+def habit_hint(word: str, cfg) -> str:
+    """For a top-level key the config lacks: another tool's word (total_timesteps, n_envs) or a key of a group
+    written without it (total_frames): `; did you mean collector.total_frames?`; '' when neither."""
+    if word == "algo":
+        return f"; {algo_line()}"
+    found = []
+    for group in cfg.keys():
+        try:
+            node = cfg.get(group)
+            if hasattr(node, "keys") and word in node:
+                found.append(f"{group}.{word}")
+        except Exception:  # noqa: BLE001 - a value that cannot be read here is no group
+            continue
+    if len(found) == 1:
+        return f"; did you mean {found[0]}?"
+    return f"; did you mean {HABITS[word]}? ({word} is another tool's word for it)" if word in HABITS else ""
 
 
 def closest(word: str, known) -> Optional[str]:
@@ -99,6 +149,9 @@ def key_hint(key: str, cfg) -> str:
         if not isinstance(node, DictConfig):
             return ""
         if part not in node:
+            habit = habit_hint(part, node) if not path else ""
+            if habit:
+                return habit
             near = closest(part, list(node.keys()))
             rest = key.lstrip("+~").split(".")[len(path) + 1:]
             return f"; did you mean {'.'.join([*path, near, *rest])}?" if near else ""

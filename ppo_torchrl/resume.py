@@ -46,5 +46,5 @@ def check_resume(resume: str, overrides: list[str]) -> Path:
     state = checkpoint.load(run_dir / "checkpoints" / checkpoint.LAST)
     cfg = resume_config(run_dir, [o for o in overrides if not o.startswith("resume=")], state, announce=True)
     validate_config(cfg)
-    check_frames_left(run_dir, state["frames"], cfg.collector.total_frames)
+    check_frames_left(run_dir, state["frames"], cfg.collector.total_frames, state)
     return run_dir

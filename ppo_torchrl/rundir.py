@@ -1,6 +1,8 @@
 """Run dirs are owned: one run per dir, one process per dir at a time, and only the app's files touched.
 
-- Each run dir holds a manifest (`.ppo_torchrl.json`) of the files this app wrote there (`record`).
+- Each run dir holds a manifest (`.ppo_torchrl.json`) of the files this app wrote there (`record`); what
+  evaluate, export and report write is listed with the sha256 of its bytes, and replaced only while it holds
+  them. An output belongs to the run dir that really holds it, however its path is spelled (ownership.py).
   A dir is a run dir only when it has one and every file in it is listed (or is a checkpoint or
   temporary file of a write killed before it was listed), with no symlink anywhere.
 - A new run needs a dir that does not exist or is empty. A run dir is refused unless
@@ -32,18 +34,22 @@ from pathlib import Path
 from typing import Dict, List, Optional
 
 from ppo_torchrl.errors import ConfigError, EnvironmentFault
+from ppo_torchrl.ownership import MANIFEST, digest, holder, inside_run, relative, walk
 
-MANIFEST = ".ppo_torchrl.json"
 STASH = ".replaced"  # earlier versions moved an overwritten run's files here; one left by a kill is moved aside whole
 ASIDE = ".replaced-"  # overwrite=true: <dir>.replaced-<time> holds the run it replaced
 LEGACY_LOCK = ".lock"  # earlier versions locked a file of this name; a leftover one is ours
-# What the app writes, by place: `record` lists the files that match. logs/ is the loggers' (any name).
-RUN_FILES = (r"config\.yaml|metrics\.csv|summary\.json|report\.png|policy\.pt|error\.log|__main__\.log"
-             r"|\.hydra/(?:config|hydra|overrides)\.yaml|checkpoints/(?:last|best|frames_\d+)\.pt"
-             r"|videos/[^/]+\.mp4|eval/[^/]+\.(?:json|csv|png|mp4)|logs/.+")
+# What the app writes, by place. logs/ is the loggers' (any name). A run or a resume writes TRAIN_FILES, which
+# `record` lists by name and time; evaluate, export and report list the files they write as they write them.
+TRAIN_FILES = (r"config\.yaml|metrics\.csv|summary\.json|error\.log|__main__\.log"
+               r"|\.hydra/(?:config|hydra|overrides)\.yaml|checkpoints/(?:last|best|frames_\d+)\.pt"
+               r"|videos/[^/]+\.mp4|logs/.+")
+RUN_FILES = rf"{TRAIN_FILES}|report\.png|policy\.pt|eval/[^/]+\.(?:json|csv|png|mp4)"
 # A run with trial_seeds is the parent of one run dir per seed (seed<k>/, each with its own manifest).
 OWNED = re.compile(rf"^(?:{RUN_FILES}|multirun\.yaml|optimization_results\.yaml|sweep_report\.(?:png|md|csv)|\.lock"
                    rf"|trial\.json|seed\d+/(?:{RUN_FILES}|{re.escape(MANIFEST)}))$")
+TRAINED = re.compile(rf"^(?:{TRAIN_FILES}|multirun\.yaml|optimization_results\.yaml|trial\.json"
+                     rf"|seed\d+/(?:{TRAIN_FILES}|{re.escape(MANIFEST)}))$")  # what `record` lists by name and time
 # Listed or not, these are the app's in an app's dir: a checkpoint or a temp file of a write cut short.
 # (Hydra's start-up files too, a sweep's multirun.yaml: a command killed before it listed them; nothing is ever
 # deleted for being here)
@@ -90,7 +96,7 @@ def atomic_write_bytes(path: Path, write, owner: Optional[Path] = None) -> None:
             os.fsync(f.fileno())
         os.chmod(tmp, 0o644)  # mkstemp makes files private; these are ordinary outputs
         if owner is not None:
-            intend(owner, [path])
+            intend(owner, [path], {path: digest(tmp)})
         os.replace(tmp, path)
     except BaseException as exc:
         if tmp is not None and os.path.exists(tmp):
@@ -116,42 +122,93 @@ def listed(directory: Path) -> Optional[List[str]]:
         return None
 
 
+def digests(directory: Path) -> Dict[str, List[str]]:
+    """The manifest's record of what evaluate, export and report wrote: name -> the sha256 of the bytes they
+    wrote (two while a write is under way: the old file's and the new one's). A listed name without one is
+    the app's whatever it holds (a manifest of an earlier version, a video being written)."""
+    try:
+        data = json.loads((Path(directory) / MANIFEST).read_text())["sha256"]
+        return {k: [h for h in v if isinstance(h, str)] for k, v in data.items() if isinstance(v, list)}
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return {}
+
+
+def _write_manifest(directory: Path, files, known: Dict[str, List[str]]) -> None:
+    files = sorted(set(files))
+    atomic_write_json(Path(directory) / MANIFEST, {"app": "ppo_torchrl", "files": files,
+                                                   "sha256": {f: known[f] for f in files if known.get(f)}})
+
+
+def _by_run(paths: List[Path]) -> Dict[Path, Dict[str, Path]]:
+    """The given outputs by the run dir that really holds each (ownership.holder): run -> {name: path}. Outputs
+    outside any run dir, or in a shipped one, are left out."""
+    runs: Dict[Path, Dict[str, Path]] = {}
+    for path in paths:
+        path = Path(path)
+        real, _ = walk(path)
+        run = holder(path)
+        name = relative(run, real) if run is not None else None
+        if name is not None and not shipped(run) and _inside(run, name):
+            runs.setdefault(run, {})[name] = path
+    return runs
+
+
 def record(directory: Path, files: Optional[List[Path]] = None) -> None:
-    """Add to the manifest the files this command wrote in `directory`: `files` (the paths it wrote), or
-    without them the files of the app's kinds (RUN_FILES...) written since this process began (a new run's
-    or a resume's: the trainer, Hydra and the loggers write there). A file that was there before the
-    command, a user's, is never listed by it."""
+    """Add to the manifest the files this command wrote: `files` (the paths evaluate, export or report just
+    wrote; each listed in the run dir that holds it, with the sha256 of the bytes it holds now), or without
+    them the files of the kinds a run or a resume writes (TRAINED) in `directory`, written since this process
+    began and not later than now (the trainer, Hydra and the loggers write there). A file that was there
+    before the command, a user's, is never listed by it; nor is a file of a kind the run does not write
+    (a policy.pt or report.png put there while a resume trains), nor one dated in the future (clock skew,
+    `cp -p`, `tar x`)."""
+    if files is not None:
+        for run, written in _by_run(files).items():
+            known = digests(run)
+            for name in written:
+                now = digest(run / name)
+                if now is not None and (name not in known or now in known[name]):
+                    known[name] = [now]  # the bytes this command wrote (a user's change since stays refused)
+            _write_manifest(run, _kept(run, set(listed(run) or []) | set(written)), known)
+        return
     directory = Path(directory)
     if not directory.is_dir():
         return
     listed_now = set(listed(directory) or [])
-    if files is not None:
-        root = directory.resolve()
-        written = {Path(os.path.relpath(Path(f).resolve(), root)).as_posix() for f in files}
-        listed_now.update(f for f in written if not f.startswith("../") and f != "..")
-    else:
-        try:
-            listed_now.update(f for f in _files(directory) if OWNED.match(f)
-                              and (directory / f).stat().st_mtime_ns >= _BEGAN_NS)
-        except ConfigError:  # a symlink put there by hand: listed files stay as they were
-            pass
-    kept = sorted(f for f in listed_now if isinstance(f, str) and _inside(directory, f) and (directory / f).is_file())
-    atomic_write_json(directory / MANIFEST, {"app": "ppo_torchrl", "files": kept})
+    until = time.time_ns()
+    try:
+        listed_now.update(f for f in _files(directory) if TRAINED.match(f)
+                          and _BEGAN_NS <= (directory / f).stat().st_mtime_ns <= until)
+    except ConfigError:  # a symlink put there by hand: listed files stay as they were
+        pass
+    _write_manifest(directory, _kept(directory, listed_now), digests(directory))
 
 
-def intend(directory: Path, paths: List[Path]) -> None:
-    """Just before evaluate, export or report write `paths` in a run dir (every check passed): list them first
-    (write-ahead), so a kill in the middle of a write leaves a file the manifest calls the app's (the next
-    command replaces it), never one that looks like the user's. A name whose file never came is dropped by
-    the next `record`."""
-    directory = Path(directory)
-    if not is_run(directory) or shipped(directory):
-        return
-    root, names = directory.resolve(), set(listed(directory) or [])
-    new = {name for name in (Path(os.path.relpath(Path(path).resolve(), root)).as_posix() for path in paths)
-           if not name.startswith("../") and name != ".." and _inside(directory, name)} - names
-    if new:
-        atomic_write_json(directory / MANIFEST, {"app": "ppo_torchrl", "files": sorted(names | new)})
+def _kept(directory: Path, names) -> List[str]:
+    return [f for f in names if isinstance(f, str) and _inside(directory, f) and (Path(directory) / f).is_file()]
+
+
+def intend(directory: Path, paths: List[Path], written: Optional[Dict[Path, Optional[str]]] = None) -> None:
+    """Just before evaluate, export or report write `paths` (every check passed): list them first, in the run
+    dir that holds each (write-ahead), with the sha256 of the bytes about to land (`written`: path -> sha256),
+    so a kill in the middle of a write leaves a file the manifest calls the app's (the next command replaces
+    it), never one that looks like the user's. A path without a sha256 (a video, written in place) is the
+    app's whatever it holds until `record` lists what it wrote. A name whose file never came is dropped by
+    the next `record`. (`directory`, the run the command is about, is not asked: a path is its holder's.)"""
+    for run, names in _by_run(paths).items():
+        files, known = set(listed(run) or []), digests(run)
+        before = (set(files), {k: list(v) for k, v in known.items()})
+        for name, path in names.items():
+            new = (written or {}).get(path)
+            if name not in files:
+                files.add(name)
+                if new is not None:
+                    known[name] = [new]
+            elif new is None:
+                known.pop(name, None)
+            elif name in known and new not in known[name]:
+                known[name] = known[name][-1:] + [new]  # the old bytes or the new: a kill leaves one of them
+        if (files, known) != before:
+            _write_manifest(run, files, known)
 
 
 def _inside(directory: Path, name: str) -> bool:
@@ -168,26 +225,34 @@ def _inside(directory: Path, name: str) -> bool:
 
 
 def check_replaceable(directory: Path, paths: List[Path]) -> None:
-    """Before evaluate, export or report write `paths`: in a run dir, one that would replace a file this app did
-    not write (a file there that the manifest does not list) or go through a symlink is one ConfigError line."""
-    directory = Path(directory)
-    if not is_run(directory):
-        return
-    ours = set(listed(directory) or [])
+    """Before evaluate, export or report write `paths`: one ConfigError line for a path that goes through a
+    symlink inside a run dir, lands in a shipped zoo folder, or would replace a file of a run dir (the one that
+    really holds it, however the path is spelled: ownership.py) that the app did not write there: one its
+    manifest does not list, or whose bytes are no longer those the app recorded when it wrote them.
+    (`directory`, the run the command is about, is not asked: a path is its holder's.)"""
     for path in paths:
         path = Path(path)
-        if not str(path.absolute()).startswith(str(directory.absolute()) + os.sep):
-            continue
-        rel = path.absolute().relative_to(directory.absolute())
-        here = directory
-        for part in rel.parts:
-            here = here / part
-            if here.is_symlink():
-                raise ConfigError(f"{here} is a symlink, which this app never writes through; give another "
+        real, links = walk(path)
+        for link, where in links:
+            if inside_run(where):
+                raise ConfigError(f"{link} is a symlink, which this app never writes through; give another "
                                   "output dir (out=<dir>) or remove the link yourself")
-        if path.exists() and rel.as_posix() not in ours:
-            raise ConfigError(f"{path} is not a file this app wrote (the run's {MANIFEST} does not list it); it is "
+        if shipped(real.parent):
+            raise ConfigError(f"{path} is in the shipped zoo/, which every command only reads; give another "
+                              "output dir (out=<dir>)")
+        run = holder(path)
+        if run is None or not (real.exists() or real.is_symlink()):
+            continue
+        name = relative(run, real)
+        what = f"{path}" + (f" (that is {real})" if Path(path).absolute() != real else "")
+        if name not in set(listed(run) or []):
+            raise ConfigError(f"{what} is not a file this app wrote (the run's {MANIFEST} does not list it); it is "
                               "left as it is: move it, or write elsewhere (out=<dir> for evaluate)")
+        accepted = digests(run).get(name)
+        if accepted and digest(real) not in accepted:
+            raise ConfigError(f"{what} is not a file this app wrote: its bytes changed after the app wrote it (the "
+                              f"sha256 in {run / MANIFEST} differs); it is left as it is: move it away, or write "
+                              "elsewhere (out=<dir> for evaluate)")
 
 
 def foreign_files(directory: Path) -> List[str]:

@@ -36,8 +36,8 @@ class OnDisk:
         if self.checkpoint is not None:
             done = self.total_frames is not None and self.checkpoint_frames >= self.total_frames
             run = shlex.quote(str(self.run_dir))
-            then = (f"every frame is trained; evaluate it with: python -m ppo_torchrl.evaluate run={run}"
-                    if done else f"resume with: python -m ppo_torchrl resume={run}")
+            then = (f"every frame is trained; python -m ppo_torchrl resume={run} runs the final eval and marks the "
+                    "run finished" if done else f"resume with: python -m ppo_torchrl resume={run}")
             return f"the last checkpoint on disk is {self.checkpoint} at frame {self.checkpoint_frames} ({then})"
         # a run stopped before it started leaves no dir (rundir.rollback): nothing to overwrite then
         again = f"; to start again in {self.run_dir} add overwrite=true" if self.run_dir and self.started else ""

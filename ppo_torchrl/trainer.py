@@ -30,7 +30,8 @@ from ppo_torchrl.envs import env_label, seed_everything
 from ppo_torchrl.errors import ConfigError, Interrupted, TrainingError
 from ppo_torchrl.eval_worker import BackgroundEval, use_background_eval
 from ppo_torchrl.evaluate import GAIT_KEYS, evaluate_policy
-from ppo_torchrl.loggers import COLUMNS, MetricsFile, Progress, close_logger, make_logger, truncate_logs
+from ppo_torchrl.loggers import (COLUMNS, MetricsFile, Progress, amend_last_row, close_logger, make_logger,
+                                 truncate_logs)
 from ppo_torchrl.losses import LOSS_INPUT_KEYS, LOSS_METRICS, NOT_COMPILABLE, make_loss, make_optimizer
 from ppo_torchrl.minibatch import make_minibatch_step
 from ppo_torchrl.models import make_actor_critic
@@ -77,7 +78,7 @@ class Trainer:
     def __init__(self, cfg, run_dir: Path, resume: Optional[dict] = None):
         self.spec = validate_config(cfg)
         if resume is not None:
-            check_frames_left(run_dir, resume["frames"], cfg.collector.total_frames)
+            check_frames_left(run_dir, resume["frames"], cfg.collector.total_frames, resume)
         self.cfg = cfg
         self.run_dir = Path(run_dir)
         self.run_dir.mkdir(parents=True, exist_ok=True)
@@ -183,8 +184,10 @@ class Trainer:
             self.write_config()
         rundir.commit(self.run_dir)  # set up without error: the run starts, what overwrite=true replaced goes
         ON_DISK.started = True
-        print(startup.describe_resume(self.run_dir, self.frames, cfg) if self.resumed
-              else startup.describe_start(cfg, startup.command_line()), file=sys.stderr, flush=True)
+        finishing = self.resumed and self.iteration >= self.num_iterations  # every batch trained, not finished
+        print(startup.describe_resume(self.run_dir, self.frames, cfg) + (
+              "; every batch is trained: the final eval runs and the run is marked finished" if finishing else "")
+              if self.resumed else startup.describe_start(cfg, startup.command_line()), file=sys.stderr, flush=True)
         batch_frames = cfg.collector.frames_per_batch
         stop = StopRequest()
         self.progress = Progress(self.num_iterations * batch_frames, self.frames, cfg.logger.print_every_s)
@@ -192,7 +195,10 @@ class Trainer:
             self.evals = BackgroundEval(cfg, self._write_row, self._eval_done)
         try:
             with stop:
-                self._loop(stop, batch_frames)
+                if finishing:
+                    self._finish(stop)
+                else:
+                    self._loop(stop, batch_frames)
         except Interrupt as signal_:  # a second signal: the iteration in flight is abandoned
             self.write_summary(status="interrupted")
             raise Interrupted(f"stopped at once; {ON_DISK.describe()}", signal_.signum) from None
@@ -251,10 +257,32 @@ class Trainer:
                     self.evals.poll(block=True)
                 self.write_summary(status="interrupted")
                 run = shlex.quote(str(self.run_dir))
-                then = (f"every frame is trained; the final eval was skipped (run it with: python -m "
-                        f"ppo_torchrl.evaluate run={run})" if last else f"resume with: python -m ppo_torchrl resume={run}")
+                then = (f"every frame is trained; the final eval was skipped: python -m ppo_torchrl resume={run} "
+                        "runs it and marks the run finished" if last else f"resume with: python -m ppo_torchrl resume={run}")
                 raise Interrupted(f"checkpoint at frame {self.frames} saved to {path} ({then})", stop.signum)
             self.write_summary(status="finished" if last else "running")
+
+    def _finish(self, stop: StopRequest) -> None:
+        """resume= of a run stopped after its last batch (a signal skipped or cut its final eval, a kill came
+        before its last summary): the final eval, if it has not run at these frames, then `finished`. The eval's
+        figures join the last row of metrics.csv, as in a run that was not stopped (a row the stop cut is written
+        with what the checkpoint holds)."""
+        cfg = self.cfg
+        ran = self.last_eval is not None and self.last_eval.get("frames") == self.frames
+        if cfg.eval.final_episodes > 0 and not ran:
+            stop.at_once = True  # a signal stops the eval at once; the run stays as it was, to finish again
+            row = self._evaluate(cfg.eval.final_episodes)
+            stop.at_once = False
+            if amend_last_row(self.run_dir / "metrics.csv", self.frames, row):
+                if self.logger is not None:
+                    for key, value in row.items():
+                        self.logger.log_scalar(key, value, step=self.frames)
+            else:  # the signal cut the eval before the last row was written: the row, as far as the checkpoint knows
+                last100 = {"train/return_last100": float(np.mean(self.recent_returns))} if self.recent_returns else {}
+                self._write_row({"iteration": self.iteration, "frames": self.frames, "time_s": self.wall_time(),
+                                 "sps": self.frames / max(self.train_time, 1e-9), **last100, **row})
+            self.save_checkpoint(eval_return=row.get("eval/return_mean"))
+        self.write_summary(status="finished")
 
     def _set_lr(self) -> float:
         """optim.anneal_lr: linear from the anchor (iteration a, lr_a; at first 0, optim.lr) to 0 at the

@@ -168,11 +168,25 @@ def check_finite(cfg) -> None:
     walk(data, "")
 
 
-def check_frames_left(run_dir, frames_done: int, total_frames: int) -> None:
-    """A resume must leave frames to train (a smaller total would be a silent no-op)."""
-    if frames_done >= total_frames:
+def check_frames_left(run_dir, frames_done: int, total_frames: int, state: dict = None) -> None:
+    """A resume must leave frames to train (a smaller total would be a silent no-op), or a run to finish: one that
+    has trained its own budget (the checkpoint's) and was stopped before its end (`unfinished`)."""
+    own = (((state or {}).get("config") or {}).get("collector") or {}).get("total_frames")
+    if frames_done >= total_frames and not (own is not None and frames_done >= own and unfinished(run_dir)):
         raise ConfigError(f"resume={run_dir}: the run has done {frames_done} frames already, collector.total_frames="
                           f"{total_frames} leaves nothing to do; give a larger collector.total_frames")
+
+
+def unfinished(run_dir) -> bool:
+    """The run's summary.json does not say `finished` (none, unreadable, interrupted, failed): a run stopped
+    after its last batch (its final eval skipped or cut, a kill before its last summary) that resume= finishes."""
+    import json
+    from pathlib import Path
+
+    try:
+        return json.loads((Path(run_dir) / "summary.json").read_text()).get("status") != "finished"
+    except (OSError, ValueError, AttributeError):
+        return True
 
 
 def resolve_device(name: str):
