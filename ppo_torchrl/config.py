@@ -156,7 +156,16 @@ class LeggedConfig:
     # experiment=legged_trot turns it off and explores gently with the policy's initial std instead.
     action_scale: float = 0.5
     saturation_cap: bool = True
-    control_dt: float = 0.02  # s: the policy acts every control_dt (frame_skip = control_dt / the model's timestep)
+    control_dt: float = 0.02  # s: the policy acts every control_dt (frame_skip = control_dt / the physics step)
+    # terrain: the robot's geoms touch the floor and the step only (robot-robot contacts only for the model's
+    # <pair>s; conf/env/legged.yaml sets it); model: every contact the model's contype/conaffinity allow,
+    # self-collisions included (runs saved before the key existed trained so, and are evaluated so).
+    # robots/model.py, filter_contacts.
+    contacts: str = "model"
+    # The physics step: rule (robots/recipe.py, rule_dt: the longest step dividing control_dt that keeps the model's
+    # contacts as soft as it says, its stiffest servo accurate and explicit damping stable; conf/env/legged.yaml),
+    # model (the model's own timestep: runs saved before the key existed trained so), or a step in seconds.
+    physics_dt: str = "model"
     target_speed: float = 0.35  # x sqrt(g l): the forward reward counts speed up to this
     forward_reward_weight: float = 3.5  # per sqrt(g l) of forward speed
     fall_height: float = 0.4  # x l: the trunk below this (m above the floor) is a fall
@@ -174,6 +183,12 @@ class LeggedConfig:
     step_distance: List[float] = field(default_factory=lambda: [2.0, 4.0])  # x l: the step's edge from the start
     success_margin: float = 1.0  # x l beyond the edge: crossed
     height_sample_spacing: float = 0.2  # x l
+    # How each part of the observation is scaled (layout.py; robots/env.py, observation_layout). segments:
+    # proprioception by the running statistics, the contact flags and the trot clock as they are, the terrain
+    # heights relative to the trunk's standing height in l with a fixed clip, so a step reads its height whatever
+    # the curriculum showed (conf/env/legged.yaml sets it). whole: one running normalization over everything,
+    # heights in world m: runs saved before the key existed (issue 59) trained so, and are evaluated so.
+    obs_layout: str = "whole"
 
 
 @dataclass

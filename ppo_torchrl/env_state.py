@@ -11,7 +11,10 @@ it (in env order):
 - the env metrics (a step env's curriculum level and recent success rate): each env's, averaged once, over
   every env of every worker, where they are logged (`mean_metrics`);
 - each env's position (positions.py: simulator, time limit, RNG, episode so far, last observation) and the
-  normalized observation its policy acts on next.
+  normalized observation its policy acts on next (`emit`: the fast collector and the `ObservationNormalization`
+  transform tell it here), the rows a resumed run's next reset gives back, and the statistics from before a
+  reset that no step has followed yet (a second one puts them back: each first observation counted once).
+  The normalizers hold statistics only; this is the one writer of the rest.
 
 Its state is one snapshot, `{"obs", "reward", "metrics", "positions"}`, with a small API that every collector
 and every scale uses:
@@ -54,6 +57,41 @@ class EnvState(Transform):
         self.gym_envs = envs
         self.obs_norm, self.reward_norm = obs_norm, reward_norm
         self.held_positions: Optional[dict] = None  # {"envs", "acted_on"} restored, waiting for continue_episodes
+        # What each env's policy acts on next, as it saw it: its last normalized observation (a resume gives it back
+        # rather than normalizing the raw one again with statistics that have moved since); the rows the next full
+        # reset gives back (continue_episodes(now=False)); the statistics before a full reset no step has followed.
+        self._emitted: Optional[np.ndarray] = None
+        self._replay: Optional[np.ndarray] = None
+        self._before_reset: Optional[dict] = None
+
+    # ------------------------------------------------------------------ what each policy acts on next
+    def emit(self, rows: np.ndarray, mask: Optional[np.ndarray] = None) -> None:
+        """The normalized observations each env's policy acts on next: all of them, or the rows of `mask` (a
+        partial reset of batched envs)."""
+        rows = np.asarray(rows)
+        if mask is None or self._emitted is None or self._emitted.shape != rows.shape:
+            self._emitted = rows.copy()
+        else:
+            self._emitted[mask] = rows[mask]
+
+    def stepped(self) -> None:
+        """An env stepped (the policy acted on the last reset's observations): that reset stays counted."""
+        self._before_reset = None
+
+    def full_reset(self) -> None:
+        """A reset of every env is about to be normalized: if the last one had no step after it, its observations
+        were never acted on, so the statistics go back to before it; either way those of now are kept."""
+        norm = self.obs_norm
+        if self._before_reset is not None and not norm.frozen:
+            norm.stats.load_state_dict(self._before_reset)
+        self._before_reset = norm.stats.state_dict()
+
+    def take_replay(self) -> Optional[np.ndarray]:
+        """The rows a full reset gives back once (continue_episodes(now=False)), else None."""
+        replay, self._replay = self._replay, None
+        if replay is not None:
+            self._before_reset = None
+        return replay
 
     # ------------------------------------------------------------------ the episodes, in TorchRL's keys
     def episodes(self) -> tuple:
@@ -94,7 +132,7 @@ class EnvState(Transform):
 
     def continue_episodes(self, now: bool) -> bool:
         """Each env continues the episode of the positions `restore` held: `now` (the fast collector: the
-        observation each policy acts on next is `obs_norm.emitted`), or at its next reset (TorchRL's Collector
+        observation each policy acts on next is `acted_on()`), or at its next reset (TorchRL's Collector
         resets its envs when it starts; that reset gives back the saved normalized observation, uncounted).
         False, changing nothing, when none are held or their count differs."""
         held, self.held_positions = self.held_positions, None
@@ -106,9 +144,9 @@ class EnvState(Transform):
             else:
                 env.pending = position
         if now:
-            self.obs_norm.emitted = held["acted_on"]
+            self._emitted = held["acted_on"]
         else:
-            self.obs_norm.replay = held["acted_on"]
+            self._replay = held["acted_on"]
         return True
 
     # ------------------------------------------------------------------ the state: snapshot, restore, merge
@@ -116,12 +154,11 @@ class EnvState(Transform):
         return {"obs": self.obs_norm.state_dict(),
                 "reward": self.reward_norm.state_dict() if self.reward_norm is not None else None,
                 "metrics": self.env_metrics(),
-                "positions": {"envs": self.positions(), "acted_on": self._acted_on()} if positions else None}
+                "positions": {"envs": self.positions(), "acted_on": self.acted_on()} if positions else None}
 
-    def _acted_on(self) -> Optional[np.ndarray]:
-        """The normalized observation each env's policy acts on next (None before any)."""
-        emitted = self.obs_norm.emitted
-        return None if emitted is None else np.asarray(emitted).copy()
+    def acted_on(self) -> Optional[np.ndarray]:
+        """The normalized observation each env's policy acts on next (None before any): a copy."""
+        return None if self._emitted is None else np.asarray(self._emitted).copy()
 
     def restore(self, snapshot: dict, returns: bool = True) -> None:
         """Load the parts of `snapshot` given: the statistics (each env's discounted return too when

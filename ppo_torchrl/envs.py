@@ -28,6 +28,7 @@ from ppo_torchrl.normalization import (
     make_reward_normalizer,
 )
 from ppo_torchrl.env_state import EnvState
+from ppo_torchrl.layout import OBS_LAYOUTS, layout_of
 from ppo_torchrl.positions import resumable
 
 # Gymnasium's v4 MuJoCo envs warn on every make that v5 exists; the warning is not actionable here.
@@ -178,7 +179,8 @@ def mjcf_kwargs(env_cfg) -> dict:
 
         env_cfg = scaled_env(env_cfg, read_robot(path, env_cfg.legged.keyframe))
         robot = {"keyframe": env_cfg.legged.keyframe, "action_scale": env_cfg.legged.action_scale,
-                 "saturation_cap": env_cfg.legged.get("saturation_cap", True)}
+                 "saturation_cap": env_cfg.legged.get("saturation_cap", True),
+                 "obs_layout": env_cfg.legged.get("obs_layout", OBS_LAYOUTS[0])}
     loco = env_cfg.locomotion
     low, high = loco.healthy_z_range
     if not low < high:
@@ -438,14 +440,17 @@ def make_torchrl_env(
     obs_dim = int(gym_envs[0].observation_space.shape[0])
     if not train and t.obs_norm != "none" and obs_stats is None:
         raise ValueError("a frozen observation normalization needs obs_stats")
+    # each segment of the observation scaled as the env declares it (layout.py; one running segment by default)
     obs_norm = make_observation_normalizer(t, obs_dim, obs_stats, frozen=not train, seed=0 if seed is None else seed,
-                                           fit_env=functools.partial(make_gym_env, env_cfg) if train else None)
+                                           fit_env=functools.partial(make_gym_env, env_cfg) if train else None,
+                                           layout=layout_of(gym_envs[0]))
     reward_norm = make_reward_normalizer(t, num_envs, gamma) if train else None
-    transforms = [EnvState(gym_envs, obs_norm, reward_norm)]
+    state = EnvState(gym_envs, obs_norm, reward_norm)
+    transforms = [state]
     if clip_actions:  # Normal head: the env gets the clipped action, the batch keeps the sample
         spec = base.action_spec
         transforms.append(ClipActionToBounds(spec.space.low, spec.space.high))
-    transforms.append(ObservationNormalization(obs_norm))  # float64 in, float32 out
+    transforms.append(ObservationNormalization(state))  # float64 in, float32 out
     transforms += extra_transforms(env_cfg)
     if train:
         transforms.append(RewardNormalization(reward_norm))

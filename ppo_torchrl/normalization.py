@@ -8,7 +8,11 @@ each has two faces over the same object:
   normalizers: their state travels in its snapshot, in any TorchRL collector's `state_dict()`.
 Observations: `standardize` is the formula, once, for numpy arrays and torch tensors alike; the
 statistics are the exact running mean and variance of every observation the envs emit (reset ones
-included), or ("fixed") moments fitted on random-action rollouts by `fit_fixed`, then frozen.
+included), or ("fixed") moments fitted on random-action rollouts by `fit_fixed`, then frozen. The env's
+`ObservationLayout` (layout.py) says which elements they scale: a segment with a treatment of its own
+(terrain heights in leg lengths, flags as they are) takes it, as per-element vectors made once, so the
+per-step cost stays a few vector ops whatever the segments. The normalizer holds statistics only; what the
+policy acts on next, and anything else of the envs', is `EnvState`'s (env_state.py).
 `pool` merges what several workers added to one set, exactly. `ObservationNormalizer.module()` is the
 frozen normalization as a torch module, which `export` bakes into policy.pt.
 Rewards: return-based scaling (SB3 VecNormalize's rule, with its prior count) or a fixed scale, then
@@ -26,6 +30,9 @@ from tensordict import TensorDictBase
 from torch import nn
 from torchrl.data import Unbounded
 from torchrl.envs.transforms import ObservationTransform, Transform
+
+from ppo_torchrl.errors import ConfigError
+from ppo_torchrl.layout import ObservationLayout
 
 OBS_MODES = ("running", "fixed", "none")  # env.transforms.obs_norm
 REWARD_MODES = ("return", "scale", "none")  # env.transforms.reward_norm
@@ -145,20 +152,23 @@ def pool(base: Optional[dict], parts: Sequence[dict]) -> dict:
 
 class ObservationNormalizer:
     """`standardize(obs, mean, max(std, eps), clip)` with running statistics that update on every
-    observation unless frozen. The numpy face: `__call__`; the torch faces: `module()` and the
-    `ObservationNormalization` transform."""
+    observation unless frozen, on the running segments of its `layout`; the other segments take their
+    fixed treatment (layout.py). The numpy face: `__call__`; the torch faces: `module()` and the
+    `ObservationNormalization` transform. Statistics only: the fields are the statistics, the formula's
+    constants (clip, epsilon, enabled) and the layout with its vectors, made once."""
 
-    def __init__(self, shape: tuple, clip: Optional[float], epsilon: float = 1e-8, enabled: bool = True):
+    def __init__(self, shape: tuple, clip: Optional[float], epsilon: float = 1e-8, enabled: bool = True,
+                 layout: Optional[ObservationLayout] = None):
+        # every element's moments are kept (the running segments' are used): the saved format, `pool` and an
+        # init_from across layouts stay those of one vector
         self.stats = RunningMeanStd(shape, prior_count=0.0)
         self.clip = clip
         self.epsilon = epsilon
         self.enabled = enabled
-        self.before_reset: Optional[dict] = None  # the statistics before a full reset no step has followed yet
-        # What the policy acts on next, as it saw it: each env's last normalized observation (TorchRL's face and the
-        # fast collector keep it; a resume gives it back instead of normalizing the raw one again with statistics
-        # that have moved since), and the rows the next full reset gives back (EnvState.continue_episodes)
-        self.emitted: Optional[np.ndarray] = None
-        self.replay: Optional[np.ndarray] = None
+        self.layout = layout if layout is not None else ObservationLayout.whole(int(np.prod(shape)))
+        if self.layout.size != self.stats.mean.size:
+            raise ValueError(f"observation layout of {self.layout.size} elements for statistics of {shape}")
+        self._vectors = self.layout.vectors(clip)  # None: every element running, the scalar formula
 
     @property
     def frozen(self) -> bool:
@@ -168,7 +178,6 @@ class ObservationNormalizer:
         self.stats.frozen = frozen
 
     def __call__(self, obs: np.ndarray, update: bool = True) -> np.ndarray:
-        self.before_reset = None  # the fast collector acts on what it normalizes
         if not self.enabled:
             return obs.astype(np.float32)
         if update:
@@ -179,7 +188,17 @@ class ObservationNormalizer:
         """The normalized observation in the input's dtype (float64 for the envs' observations)."""
         if not self.enabled:
             return obs
-        return standardize(obs, self.stats.mean, obs_scale(self.stats.var, self.epsilon), self.clip)
+        return standardize(obs, *self.coefficients())
+
+    def coefficients(self) -> tuple:
+        """(mean, scale, bound) of `standardize` now: the statistics' on the running elements, each fixed segment's
+        offset, scale and clip on its own, 0, 1 and no bound (inf) on the others; the bound a scalar (obs_clip)
+        where every element is running."""
+        mean, scale = self.stats.mean, obs_scale(self.stats.var, self.epsilon)
+        if self._vectors is None:
+            return mean, scale, self.clip
+        running, offset, fixed_scale, bound = self._vectors
+        return np.where(running, mean, offset), np.where(running, scale, fixed_scale), bound
 
     def fit_fixed(self, gym_env, frames: int, seed: int) -> None:
         """obs_norm=fixed: the moments of `frames` observations of random-action rollouts, then frozen."""
@@ -192,12 +211,21 @@ class ObservationNormalizer:
         self.freeze()
 
     def state_dict(self) -> Optional[dict]:
-        """{"mean", "var", "count"}: the one format checkpoints, evaluation, export and init_from read."""
-        return {**self.stats.state_dict(), "frozen": self.frozen} if self.enabled else None
+        """{"mean", "var", "count", "layout"}: the one format checkpoints, evaluation, export and init_from read."""
+        if not self.enabled:
+            return None
+        return {**self.stats.state_dict(), "frozen": self.frozen, "layout": self.layout.to_state()}
 
     def load_state_dict(self, state: Optional[dict]) -> None:
+        """The statistics. A state saved with a layout must have this one (statistics scaled one way are not the
+        policy's input scaled another); one saved without (before layouts) loads into any of its size."""
         if state is None or not self.enabled:
             return
+        if state.get("layout"):
+            saved = ObservationLayout.from_state(state["layout"], self.layout.size)
+            if saved != self.layout:
+                raise ConfigError(f"the saved observation statistics were kept for the layout {saved.describe()}, "
+                                  f"not this env's {self.layout.describe()}")
         self.stats.load_state_dict(state)
         self.freeze(bool(state.get("frozen", self.frozen)))
 
@@ -207,26 +235,34 @@ class ObservationNormalizer:
 
 
 class FrozenNormalization(nn.Module):
+    """The normalizer's `coefficients()` as buffers: the same per-segment formula, frozen (export)."""
+
     def __init__(self, normalizer: ObservationNormalizer):
         super().__init__()
-        mean, scale = normalizer.stats.mean, obs_scale(normalizer.stats.var, normalizer.epsilon)
+        mean, scale, bound = normalizer.coefficients()
         if not normalizer.enabled:
-            mean, scale = np.zeros_like(mean), np.ones_like(mean)
+            mean, scale, bound = np.zeros_like(mean), np.ones_like(mean), None
         self.register_buffer("mean", torch.as_tensor(mean, dtype=torch.float64))
         self.register_buffer("scale", torch.as_tensor(scale, dtype=torch.float64))
-        self.bound = normalizer.clip if normalizer.enabled else None
+        if isinstance(bound, np.ndarray):  # per element (a layout with segments of their own)
+            self.register_buffer("bound", torch.as_tensor(bound, dtype=torch.float64))
+        else:
+            self.bound = bound
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
         return standardize(obs.double(), self.mean, self.scale, self.bound)
 
 
 def make_observation_normalizer(transforms_cfg, obs_dim: int, stats: Optional[dict] = None,
-                                frozen: bool = False, fit_env=None, seed: int = 0) -> ObservationNormalizer:
-    """From `env.transforms`; with `stats` (a checkpoint's), loaded, and frozen if asked. A training env's
-    `fixed` statistics without `stats`: fitted on random rollouts of `fit_env()` (an env of their own), then
-    frozen."""
+                                frozen: bool = False, fit_env=None, seed: int = 0,
+                                layout: Optional[ObservationLayout] = None) -> ObservationNormalizer:
+    """From `env.transforms` and the env's `layout` (without one: the layout `stats` were saved with, else one
+    running segment); with `stats` (a checkpoint's), loaded, and frozen if asked. A training env's `fixed`
+    statistics without `stats`: fitted on random rollouts of `fit_env()` (an env of their own), then frozen."""
     t = transforms_cfg
-    norm = ObservationNormalizer((obs_dim,), t.obs_clip, t.norm_epsilon, enabled=t.obs_norm != "none")
+    if layout is None:
+        layout = ObservationLayout.from_state((stats or {}).get("layout"), obs_dim)
+    norm = ObservationNormalizer((obs_dim,), t.obs_clip, t.norm_epsilon, enabled=t.obs_norm != "none", layout=layout)
     if stats is not None:
         norm.load_state_dict(stats)
     elif t.obs_norm == "fixed" and fit_env is not None:
@@ -245,11 +281,16 @@ class ObservationNormalization(ObservationTransform):
     An observation no policy acted on is not counted: a reset of every env that follows another with no step
     between (TorchRL's multi-process collectors reset each worker's envs after seeding them, the Collector
     having reset them once when built) puts back the statistics from before the first, so every path and
-    scale counts each env's first observation once, as the fast collector does."""
+    scale counts each env's first observation once, as the fast collector does.
+    What the policy acts on next, and when a reset is counted, are the env's `EnvState`'s (env_state.py): this
+    transform tells it through its API (`stepped`, `emit`, `full_reset`, `take_replay`), holding nothing."""
 
-    def __init__(self, normalizer: ObservationNormalizer):
+    def __init__(self, state):
         super().__init__(in_keys=["observation"], out_keys=["observation"])
-        self.normalizer = normalizer
+        # the env's EnvState (env_state.py, which imports this module), not as a child module: its state is saved
+        # once, as the chain's first transform (a child's extra state would be saved, and loaded, twice)
+        object.__setattr__(self, "state", state)
+        self.normalizer: ObservationNormalizer = state.obs_norm
 
     def _normalize(self, obs: torch.Tensor, mask: Optional[torch.Tensor] = None) -> torch.Tensor:
         norm = self.normalizer
@@ -274,9 +315,9 @@ class ObservationNormalization(ObservationTransform):
         return torch.as_tensor(self.normalizer.apply(x), dtype=torch.float32, device=obs.device)
 
     def _call(self, next_tensordict: TensorDictBase) -> TensorDictBase:
-        self.normalizer.before_reset = None
+        self.state.stepped()
         out = self._normalize(next_tensordict.get("observation"))
-        self.normalizer.emitted = out.cpu().numpy().copy()
+        self.state.emit(out.cpu().numpy())
         return next_tensordict.set("observation", out)
 
     def _reset(self, tensordict: TensorDictBase, tensordict_reset: TensorDictBase) -> TensorDictBase:
@@ -284,22 +325,17 @@ class ObservationNormalization(ObservationTransform):
         obs = tensordict_reset.get("observation")
         if mask is not None:
             mask = mask.reshape(obs.shape[:-1])
-        norm = self.normalizer
+        state = self.state
         full = mask is None or bool(mask.all())
-        if full and norm.replay is not None:  # saved episodes continue: what the policy was to act on, uncounted
-            replay, norm.replay, norm.before_reset = norm.replay, None, None
-            norm.emitted = np.asarray(replay, np.float32).reshape(obs.shape).copy()
-            return tensordict_reset.set("observation", torch.from_numpy(norm.emitted.copy()).to(obs.device))
         if full:
-            if norm.before_reset is not None and not norm.frozen:  # the last reset's observations: never acted on
-                norm.stats.load_state_dict(norm.before_reset)
-            norm.before_reset = norm.stats.state_dict()
+            replay = state.take_replay()
+            if replay is not None:  # saved episodes continue: what the policy was to act on, uncounted
+                rows = np.asarray(replay, np.float32).reshape(obs.shape)
+                state.emit(rows)
+                return tensordict_reset.set("observation", torch.from_numpy(rows.copy()).to(obs.device))
+            state.full_reset()  # the statistics of a reset that no step followed are taken back
         out = self._normalize(obs, mask)
-        rows = out.cpu().numpy()
-        if full or norm.emitted is None or norm.emitted.shape != rows.shape:
-            norm.emitted = rows.copy()
-        else:
-            norm.emitted[mask.cpu().numpy()] = rows[mask.cpu().numpy()]
+        state.emit(out.cpu().numpy(), None if full else mask.cpu().numpy())
         return tensordict_reset.set("observation", out)
 
 

@@ -93,8 +93,9 @@ def test_workers_collect_exact_on_policy_batches_and_share_one_set_of_stats(tiny
             theirs = env_snapshot(worker, collector._key)
             assert len(theirs["positions"]["envs"]) == 2  # collector.num_envs in this worker
             for kind in ("obs", "reward"):  # the observation and return statistics
-                for name in set(mine[kind]) - {"returns"}:
+                for name in set(mine[kind]) - {"returns", "layout"}:
                     torch.testing.assert_close(torch.as_tensor(theirs[kind][name]), torch.as_tensor(mine[kind][name]))
+                assert theirs[kind].get("layout") == mine[kind].get("layout")  # the layout they scale (layout.py)
     finally:
         collector.close()
 

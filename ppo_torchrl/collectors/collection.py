@@ -126,9 +126,10 @@ class Collection:
         return self._metrics
 
     def obs_stats(self) -> Optional[dict]:
-        """Observation statistics {"mean", "var", "count"} (None without normalization)."""
+        """Observation statistics {"mean", "var", "count", "layout"} (None without normalization): the layout they
+        scale the observation with (layout.py) travels with them, to checkpoints, evaluation and export."""
         state = self.state.obs_norm.state_dict()
-        return None if state is None else {k: state[k] for k in ("mean", "var", "count")}
+        return None if state is None else {k: state[k] for k in ("mean", "var", "count", "layout")}
 
     # ---------------------------------------------------------------- the workers' EnvStates, pooled
     def _collector_state(self):

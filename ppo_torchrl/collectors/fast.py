@@ -65,13 +65,16 @@ class FastCollector(Collector):
     def _current_obs(self) -> np.ndarray:
         if self._obs is None:
             self._obs = self.obs_norm(np.stack([env.last_obs for env in self.env_state.gym_envs]), update=not self._counted)
-            self.obs_norm.emitted = self._obs  # what EnvState saves as the observation each policy acts on next
+            self.env_state.stepped()  # acted on: a reset before this one stays counted
+            self.env_state.emit(self._obs)  # what EnvState saves as the observation each policy acts on next
         return self._obs
 
     @torch.no_grad()
     def rollout(self) -> TensorDict:
         n, steps = self.num_envs, self.steps
         obs = self._current_obs()
+        if steps:
+            self.env_state.stepped()  # the steps below act on the last reset's observations
         obs_dim = obs.shape[1]
         policy = self.numpy_policy
         policy.sync()
@@ -113,7 +116,8 @@ class FastCollector(Collector):
                     self._traj_ids[i] = self._traj_ids.max() + 1
             next_buf[t] = next_obs
             rew_buf[t] = scale_rewards(reward, term_buf[t] | trunc_buf[t])
-        self._obs = self.obs_norm.emitted = obs
+        self._obs = obs
+        self.env_state.emit(obs)
 
         def tensor(x: np.ndarray) -> torch.Tensor:  # [steps, n, ...] -> [n, steps, ...]
             return torch.from_numpy(np.ascontiguousarray(np.swapaxes(x, 0, 1)))
@@ -158,5 +162,5 @@ class FastCollector(Collector):
         kwargs.setdefault("strict", False)
         super().load_state_dict(keep_counters(self, state), **kwargs)
         if own is not None and self.env_state.continue_episodes(now=True):
-            self._obs = np.asarray(self.obs_norm.emitted, np.float32).reshape(self.num_envs, -1).copy()
+            self._obs = np.asarray(self.env_state.acted_on(), np.float32).reshape(self.num_envs, -1).copy()
             self.rng.bit_generator.state = own["rng"]

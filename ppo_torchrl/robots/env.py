@@ -8,7 +8,8 @@ configured (so a config without these keys steps exactly as Ant-v5 does):
   (target = standing angle + scale x action, action in [-1, 1]; scale: env.legged.action_scale, or with
   env.legged.saturation_cap the servo's saturation angle, peak torque / kp, where smaller) sent to the servos
   as the model has them, torque motors being made PD servos first; the step added to the model at
-  build time (robots/terrain.py).
+  build time (robots/terrain.py); the robot's geoms made to touch the terrain only (env.legged.contacts)
+  and the physics step set (env.legged.physics_dt), both at build time (robots/model.py).
 - **Heading** (`env.locomotion.heading`): the forward reward and eval's forward velocity are the main
   body's velocity along this ground direction, not +x of the world.
 - **Actuation** (`torque_limit`, `joint_speed_limit`, `kp`, `kd`, `armature`): the model's actuators
@@ -30,7 +31,9 @@ configured (so a config without these keys steps exactly as Ant-v5 does):
 - **Observation extras** (opt-in, the policy is blind by default): one 0/1 ground-contact flag per foot;
   terrain heights at points ahead of the main body, computed from the known step geometry
   (the step's top where the point lies beyond its edge, else 0: the floor is at z = 0); the trot
-  clock's phase (sin, cos).
+  clock's phase (sin, cos). How each is scaled is the env's to say (`observation_layout`, layout.py): with
+  env.legged.obs_layout=segments the heights come relative to the trunk and are scaled by the leg length
+  with a fixed clip, flags and clock pass as they are, and only the rest goes through running statistics.
 - **Gait bookkeeping** for eval (`measure_gait = True`; robots/gait.py), sampled every physics step.
 - **Tracking camera**: a rendered model without a camera named `track` gets one on its main body.
 - **A robot to film**: MuJoCo draws geom groups 0-2 only, and models whose visual meshes were left out
@@ -50,14 +53,16 @@ from gymnasium.envs.mujoco.ant_v5 import AntEnv
 from gymnasium.spaces import Box
 
 from ppo_torchrl.errors import ConfigError
+from ppo_torchrl.layout import ObservationLayout, Segment
 from ppo_torchrl.robots.contacts import FootContacts
 from ppo_torchrl.robots.gait import MOVING_SPEED, GaitMeter
-from ppo_torchrl.robots.model import Robot, read_robot
+from ppo_torchrl.robots.model import Robot, filter_contacts, read_robot
 from ppo_torchrl.robots.rewards import LeggedRewards
 from ppo_torchrl.robots.terrain import STEP_BODY, TERRAIN_STEP_KEYS, StepTerrain, add_step
 
 LOCOMOTION_ID = "ppo_torchrl/Locomotion-v0"
 HEADINGS = {"x": 0.0, "-x": 180.0, "y": 90.0, "-y": 270.0}
+HEIGHT_CLIP = 1.0  # x l: terrain heights relative to the trunk read within +-1 leg length (observation_layout)
 
 # Keys of env.locomotion that LocomotionEnv takes (the others are Ant-v5's own arguments).
 LEGGED_KEYS = ("heading", "target_speed", "torque_limit", "joint_speed_limit", "kp", "kd", "armature",
@@ -65,7 +70,7 @@ LEGGED_KEYS = ("heading", "target_speed", "torque_limit", "joint_speed_limit", "
                "action_rate_cost_weight", "foot_slip_cost_weight", "base_height_cost_weight", "base_height_target",
                "orientation_cost_weight", "body_contact_cost_weight", "feet_air_time_weight", "feet_air_time_target",
                "foot_geoms", "only_positive_rewards", "terminate_on_contact", "healthy_z_above_terrain",
-               "gait_period", "gait_clock_weight")
+               "gait_period", "gait_clock_weight", "contacts", "physics_dt")
 
 
 def register() -> None:
@@ -121,6 +126,7 @@ class LocomotionEnv(StepTerrain, FootContacts, LeggedRewards, AntEnv):
     # Within step, read once after the control step: is_healthy (and the contacts: FootContacts._now).
     _healthy_now = None
     _moving = False  # the last control step went forward at MOVING_SPEED or more (gait bookkeeping)
+    contact_filter = None  # env.legged.contacts=terrain: (robot geoms left colliding, robot geoms made non-colliding)
 
     def __init__(self, xml_file: str, legged: Optional[dict] = None, terrain: Optional[dict] = None,
                  evaluation: bool = False, robot: Optional[dict] = None, **ant_kwargs):
@@ -131,6 +137,7 @@ class LocomotionEnv(StepTerrain, FootContacts, LeggedRewards, AntEnv):
         self._add_track_camera = False
         self._draw_collision_geoms = ant_kwargs.get("render_mode") is not None
         self._robot: Optional[Robot] = None if robot is None else read_robot(xml_file, robot.get("keyframe"))
+        self._segments = robot is not None and robot.get("obs_layout") == "segments"  # observation_layout
         self._step_to_add = self._step_needed(xml_file, terrain) if self._robot is not None else None
         if ant_kwargs.get("render_mode") is not None and "camera_name" not in ant_kwargs and "camera_id" not in ant_kwargs:
             probe = mujoco.MjModel.from_xml_path(str(xml_file))
@@ -190,11 +197,18 @@ class LocomotionEnv(StepTerrain, FootContacts, LeggedRewards, AntEnv):
 
     # -- model set-up --------------------------------------------------------------------------------
     def _initialize_simulation(self):
-        if not (self._add_track_camera or self._step_to_add or self._draw_collision_geoms):
+        # env=legged's contacts and physics step (robots/model.py; recipe.py derives them): None for other envs
+        only_terrain, physics_dt = self._legged.get("contacts") == "terrain", self._legged.get("physics_dt")
+        if not (self._add_track_camera or self._step_to_add or self._draw_collision_geoms or only_terrain
+                or physics_dt):
             return super()._initialize_simulation()
         spec = mujoco.MjSpec.from_file(self.fullpath)  # the model file is read, never written
         if self._step_to_add:
             add_step(spec, *self._step_to_add)
+        if only_terrain:  # after the step is added: it is terrain
+            self.contact_filter = filter_contacts(spec)
+        if physics_dt:
+            spec.option.timestep = float(physics_dt)
         if self._draw_collision_geoms:
             self._draw_collision_geoms = draw_hidden_robot(spec)
         if self._add_track_camera:
@@ -428,11 +442,31 @@ class LocomotionEnv(StepTerrain, FootContacts, LeggedRewards, AntEnv):
         if self.height_samples:
             body = self.data.xpos[self._body_id]
             ahead = self._along(body) + self._sample_offsets
-            extras.append(self.terrain_height(ahead))
+            # obs_layout=segments: relative to the trunk (observation_layout scales it); whole: world z, as before
+            extras.append(self.terrain_height(ahead) - body[2] if self._segments else self.terrain_height(ahead))
         if self._period is not None:
             angle = 2.0 * math.pi * self.clock_phase()
             extras.append(np.array([math.sin(angle), math.cos(angle)]))
         return np.concatenate([observation, *extras]) if extras else observation
+
+    def observation_layout(self) -> ObservationLayout:
+        """The observation's segments and how each is scaled (layout.py). env.legged.obs_layout=segments:
+        proprioception (Ant-v5's: trunk height and attitude, joint angles, speeds) by the running statistics; the
+        0/1 foot contacts and the clock's sin and cos as they are; the terrain heights, emitted as h - z (each
+        sample's ground height less the trunk's z, m), as (h - z + H) / l clipped at +-HEIGHT_CLIP, with H the
+        trunk's standing height and l the leg length, both read from the model: 0 on flat ground at standing
+        height, 0.25 for a step of 0.25 l ahead, whatever the running statistics saw. whole (runs saved before
+        issue 59, any env without a robot): one running segment over everything."""
+        size = int(self.observation_space.shape[0])
+        if not self._segments:
+            return ObservationLayout.whole(size)
+        feet, clock = len(self.feet) * self.observe_contacts, 2 * (self._period is not None)
+        robot = self._robot
+        parts = (Segment.running("proprioception", size - feet - self.height_samples - clock),
+                 Segment.none("foot_contacts", feet),
+                 Segment.fixed("terrain_heights", self.height_samples, -robot.height, robot.leg_length, HEIGHT_CLIP),
+                 Segment.none("clock", clock))
+        return ObservationLayout(tuple(p for p in parts if p.size))
 
     # -- what a resumed run needs beyond the simulator state -----------------------------------------
     def get_extra_state(self) -> dict:

@@ -22,6 +22,10 @@ derived from the MJCF and nothing else.
   (`Robot.action_scales`).
 - **Size**: leg length l, thigh plus shank (hip-flexion joint to knee joint to foot centre, whatever
   the pose), the mean over the legs; mass, the sum of the robot's bodies.
+- **Contacts** (`filter_contacts`, env.legged.contacts=terrain): the robot's geoms touch the terrain (the
+  geoms of bodies welded to the world: the floor, the step) and nothing else; robot-robot contacts only
+  where the model asks for them by name (its `<pair>` elements; MuJoCo's default contype = conaffinity = 1
+  on every geom is no such request). env.legged.contacts=model: as the model has them.
 
 A model that cannot be read this way is one ConfigError line: no free joint, not four legs with a
 foot each, feet not one at each corner, an unknown keyframe, an actuator on no joint, an actuator that
@@ -73,12 +77,26 @@ class Robot:
     home_angle: tuple  # each actuator's joint angle at the standing pose (rad)
     gear: tuple
     timestep: float  # s, the model's physics step
+    inertia: tuple  # kg m^2 per actuator: its joint's at the standing pose (mass matrix diagonal, armature included)
+    time_constant: float  # s: the shortest of the robot's contacts and joint limits (solref[0]; _time_constant)
+    implicit_damping: bool  # the model's integrator takes the servos' damping implicitly (implicit, implicitfast)
 
     def action_scales(self, most: float, cap: bool = True) -> tuple:
         """Per actuator, the angle (rad) a full action moves its joint's target from the standing pose: `most`
         (env.legged.action_scale), or with `cap` less where the servo saturates sooner, at its peak torque / kp
         (a larger offset asks for torque the drive does not have; but it also bounds how far a joint can go)."""
         return tuple(min(most, peak / kp) if cap and kp > 0 else most for peak, kp in zip(self.peak_torque, self.kp))
+
+    @property
+    def servo_rate(self) -> float:
+        """rad/s: the stiffest servo's natural frequency, sqrt(kp / I) on its joint's own inertia (the fastest
+        motion the drives make; a leg on the ground moves more mass, so slower)."""
+        return max(math.sqrt(kp / i) for kp, i in zip(self.kp, self.inertia))
+
+    @property
+    def damping_rate(self) -> float:
+        """1/s: the largest servo damping per inertia, kd / I."""
+        return max(kd / i for kd, i in zip(self.kd, self.inertia))
 
     @property
     def speed_scale(self) -> float:
@@ -239,9 +257,13 @@ def _read_robot(path: str, keyframe: Optional[str]) -> Robot:
     order = sorted(range(4), key=lambda i: CORNERS.index(corners[i]))  # LF, RF, LH, RH
     feet = [feet[i] for i in order]
 
-    kp, kd, peak = [], [], []
+    kp, kd, peak, inertia = [], [], [], []
     for a, j in enumerate(joints):
         peak.append(_peak_torque(model, a, drive[a]))
+        unit, column = np.zeros(model.nv), np.zeros(model.nv)
+        unit[model.jnt_dofadr[j]] = 1.0
+        mujoco.mj_mulM(model, data, column, unit)  # the mass matrix's column: its diagonal, armature included
+        inertia.append(float(column[model.jnt_dofadr[j]]))
         if drive[a] == "position":  # on length gear x q: joint gains are the actuator's x gear^2
             gear2 = float(model.actuator_gear[a, 0]) ** 2
             kp.append(float(model.actuator_gainprm[a, 0]) * gear2)
@@ -251,13 +273,8 @@ def _read_robot(path: str, keyframe: Optional[str]) -> Robot:
                 raise ConfigError(f"{where}: torque motor '{model.actuator(a).name or a}' has no torque limit "
                                   "(ctrlrange, forcerange or its joint's actuatorfrcrange): no PD gain can be derived")
             gain = peak[-1] / PD_SATURATION_RAD
-            unit = np.zeros(model.nv)
-            unit[model.jnt_dofadr[j]] = 1.0
-            column = np.zeros(model.nv)
-            mujoco.mj_mulM(model, data, column, unit)  # the mass matrix's column: its diagonal, armature included
-            inertia = float(column[model.jnt_dofadr[j]])
             kp.append(gain)
-            kd.append(2.0 * math.sqrt(gain * inertia))
+            kd.append(2.0 * math.sqrt(gain * inertia[-1]))
     subtree = [b for b in range(model.nbody) if model.body_rootid[b] == model.body_rootid[trunk]]
     return Robot(
         name=name, path=path, trunk=model.body(trunk).name, keyframe=key,
@@ -268,7 +285,57 @@ def _read_robot(path: str, keyframe: Optional[str]) -> Robot:
         leg_length=float(np.mean(lengths)), leg_lengths=tuple(lengths[i] for i in order),
         mass=float(model.body_mass[subtree].sum()), drive=tuple(drive), kp=tuple(kp), kd=tuple(kd),
         peak_torque=tuple(peak), home_angle=tuple(float(data.qpos[model.jnt_qposadr[j]]) for j in joints),
-        gear=tuple(float(model.actuator_gear[a, 0]) or 1.0 for a in range(model.nu)), timestep=float(model.opt.timestep))
+        gear=tuple(float(model.actuator_gear[a, 0]) or 1.0 for a in range(model.nu)),
+        timestep=float(model.opt.timestep), inertia=tuple(inertia), time_constant=_time_constant(model, subtree),
+        implicit_damping=model.opt.integrator in (mujoco.mjtIntegrator.mjINT_IMPLICIT,
+                                                  mujoco.mjtIntegrator.mjINT_IMPLICITFAST))
+
+
+def _time_constant(model, robot_bodies: list) -> float:
+    """The shortest time constant (solref[0], s; MuJoCo's standard form, solref[0] > 0) of the constraints a
+    locomotion step makes: contacts of the robot's colliding geoms and the world's, the robot's joint limits."""
+    bodies = set(robot_bodies) | {0}
+    geoms = [g for g in range(model.ngeom) if _colliding(model, g)
+             and (model.geom_bodyid[g] in bodies or model.body_weldid[model.geom_bodyid[g]] == 0)]
+    limits = [j for j in range(model.njnt) if model.jnt_limited[j] and model.jnt_bodyid[j] in bodies]
+    refs = [model.geom_solref[g, 0] for g in geoms] + [model.jnt_solref[j, 0] for j in limits]
+    return float(min([r for r in refs if r > 0] or [mujoco.MjOption().o_solref[0]]))
+
+
+CONTACT_MODES = ("terrain", "model")  # env.legged.contacts (module doc)
+TERRAIN_BIT = 1 << 30  # the contype bit of the robot's geoms and, in conaffinity, of the terrain's (filter_contacts)
+
+
+def filter_contacts(spec) -> tuple:
+    """Makes the robot's geoms touch the terrain only (module doc), in a model being built (mujoco.MjSpec,
+    after any terrain is added): the terrain, every colliding geom of a body welded to the world, gets
+    TERRAIN_BIT in its conaffinity; each robot geom (a body under a free joint) that could touch some terrain
+    geom gets contype TERRAIN_BIT and conaffinity 0, the others contype = conaffinity = 0. MuJoCo makes a
+    contact where (contype1 & conaffinity2) | (contype2 & conaffinity1): robot-terrain pairs pass, robot-robot
+    pairs never do (a robot geom's conaffinity is 0); the model's <pair> elements bypass these bits and stay,
+    as do its excludes. Returns (robot geoms left colliding, robot geoms made non-colliding) for the start line.
+    (spec.bodies lists the bodies in the compiled model's order, the world first.)"""
+    plain = spec.compile()
+    static = plain.body_weldid == 0  # per body
+    free_roots = {plain.body_rootid[plain.jnt_bodyid[j]] for j in range(plain.njnt)
+                  if plain.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE}
+    terrain, robot = [], []
+    for b, body in enumerate(spec.bodies):
+        for geom in body.geoms:
+            if not (geom.contype or geom.conaffinity):
+                continue
+            if static[b]:
+                terrain.append(geom)
+            elif plain.body_rootid[b] in free_roots:
+                robot.append(geom)
+    kept = dropped = 0
+    for geom in robot:
+        touches = any((geom.contype & t.conaffinity) or (t.contype & geom.conaffinity) for t in terrain)
+        geom.contype, geom.conaffinity = (TERRAIN_BIT if touches else 0), 0
+        kept, dropped = kept + touches, dropped + (not touches)
+    for geom in terrain:
+        geom.conaffinity |= TERRAIN_BIT
+    return kept, dropped
 
 
 def robot_label(path) -> str:

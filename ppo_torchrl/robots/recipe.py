@@ -5,6 +5,10 @@ of sqrt(g l), times of sqrt(l / g), torques of m g l (dynamic similarity: a Go1 
 for the same multiples walk alike). The robot's own facts (trunk, heading, standing height, feet) are
 taken as read.
 
+The physics step is derived too (env.legged.physics_dt=rule, `rule_dt`): the longest step that divides the
+control step and keeps the model's contacts as soft as it says, its stiffest servo accurate and explicit damping
+stable; model keeps the model's own timestep.
+
 Every value derived here has one owner, env.legged: setting the same key in env.locomotion or
 env.terrain is refused in one line (env.terrain.step_height, a fixed height, stays the user's: evaluate's
 height sweep sets it).
@@ -17,7 +21,8 @@ import math
 from omegaconf import OmegaConf
 
 from ppo_torchrl.errors import ConfigError
-from ppo_torchrl.robots.model import GRAVITY, Robot
+from ppo_torchrl.layout import OBS_LAYOUTS
+from ppo_torchrl.robots.model import CONTACT_MODES, GRAVITY, Robot
 
 # env.locomotion / env.terrain keys env=legged derives (module doc), with the env.legged key each comes from
 DERIVED = {
@@ -35,16 +40,47 @@ DERIVED = {
 }
 
 
+PHYSICS_STEPS = ("rule", "model")  # env.legged.physics_dt, besides a step in seconds
+SERVO_PHASE = 0.5  # rad: the stiffest servo turns at most this much of its oscillation per physics step
+DAMPING_STEP = 1.0  # kd / I x dt where the integrator takes the servos' damping explicitly (Euler): half its limit of 2
+
+
+def rule_dt(robot: Robot, control_dt: float) -> float:
+    """The physics step by the recipe's rule: the longest that divides the control step into whole steps and keeps
+    (1) every contact and joint limit as soft as the model says: dt <= its shortest time constant / 2 (MuJoCo's own
+        floor: with a longer step it softens them, to a time constant of 2 dt);
+    (2) the stiffest servo accurate: its natural frequency w = sqrt(kp / I) on its joint's own inertia with
+        w dt <= SERVO_PHASE (the integrator's frequency error (w dt)^2 / 24 about 1%);
+    (3) explicit servo damping stable with a margin: kd / I x dt <= DAMPING_STEP (Euler; implicit integrators take
+        it implicitly);
+    never finer than the model's own timestep (a model its authors made stiffer than these bounds keeps theirs)."""
+    bound = min(robot.time_constant / 2, SERVO_PHASE / robot.servo_rate,
+                math.inf if robot.implicit_damping or robot.damping_rate == 0 else DAMPING_STEP / robot.damping_rate)
+    return max(control_dt / math.ceil(control_dt / bound - 1e-9), robot.timestep)
+
+
+def physics_dt(robot: Robot, legged) -> float:
+    """The physics step (s) of env.legged.physics_dt: rule (rule_dt), model (the model's own timestep, as runs
+    saved before the key trained), or a step in seconds. A control step is a whole number of them (frame_skip)."""
+    given = str(legged.get("physics_dt") or "model")
+    if given == "rule":
+        return rule_dt(robot, legged.control_dt)
+    return robot.timestep if given == "model" else float(given)
+
+
 def derived_values(robot: Robot, legged) -> dict:
-    """{'locomotion': {...}, 'terrain': {...}}: the values env.legged's targets take on this robot."""
+    """{'locomotion': {...}, 'terrain': {...}}: the values env.legged's targets take on this robot (with the env's
+    contacts and physics step, robots/env.py, which no other env reads)."""
     l, speed, time = robot.leg_length, robot.speed_scale, robot.time_scale
+    dt = physics_dt(robot, legged)
     weight_moment = robot.mass * GRAVITY * l  # N m
     band = legged.curriculum_band
     return {
         "locomotion": {
             "main_body": robot.trunk,
             "heading": f"{math.degrees(math.atan2(robot.heading[1], robot.heading[0])):.6f}",
-            "frame_skip": max(1, round(legged.control_dt / robot.timestep)),
+            "frame_skip": max(1, round(legged.control_dt / dt)),
+            "physics_dt": dt, "contacts": legged.get("contacts", CONTACT_MODES[0]),
             "target_speed": legged.target_speed * speed,
             "forward_reward_weight": legged.forward_reward_weight / speed,
             "healthy_z_range": [legged.fall_height * l, legged.too_high * l],
@@ -76,9 +112,11 @@ def describe(robot: Robot, legged) -> str:
     clock = f", trot clock {loco['gait_period']:.2f} s" if loco["gait_period"] else ""
     scales = robot.action_scales(legged.action_scale, legged.get("saturation_cap", True))
     reach = f"{min(scales):.2f}" + (f"-{max(scales):.2f}" if max(scales) > min(scales) else "")
+    dt = loco["physics_dt"]
     return (f"{robot.describe()}; recipe: step {terrain['eval_step_height'] * 100:.1f} cm (0.25 l), speed up to "
             f"{loco['target_speed']:.2f} m/s, fall under {loco['healthy_z_range'][0] * 100:.1f} cm, actions move "
-            f"joints up to {reach} rad, control every {loco['frame_skip'] * robot.timestep * 1000:g} ms{clock}"
+            f"joints up to {reach} rad, control every {loco['frame_skip'] * dt * 1000:g} ms (physics "
+            f"{dt * 1000:g} ms, contacts: {loco['contacts']}){clock}"
             ).replace("(0.25 l)", f"({legged.step_height:g} l)")
 
 
@@ -113,6 +151,20 @@ def legged_checks(legged) -> list:
     checks += [(legged[k] >= 0, f"env.legged.{k}={legged[k]} must be >= 0")
                for k in ("forward_reward_weight", "gait_clock_weight", "torque_cost_weight", "joint_speed_cost_weight",
                          "foot_slip_cost_weight", "base_height_cost_weight")]
+    contacts, dt = legged.get("contacts", CONTACT_MODES[0]), str(legged.get("physics_dt") or "model")
+    checks.append((contacts in CONTACT_MODES, f"env.legged.contacts={contacts} is not known; use "
+                   + " or ".join(CONTACT_MODES) + " (robots/model.py, filter_contacts)"))
+    try:
+        seconds = None if dt in PHYSICS_STEPS else float(dt)
+    except ValueError:
+        seconds = math.nan
+    whole = seconds is None or (0 < seconds <= legged.control_dt
+                                and abs(legged.control_dt / seconds - round(legged.control_dt / seconds)) < 1e-6)
+    checks.append((whole, f"env.legged.physics_dt={dt} must be rule, model or a step in seconds that divides "
+                          f"env.legged.control_dt={legged.control_dt} into whole steps"))
+    obs_layout = legged.get("obs_layout", OBS_LAYOUTS[0])
+    checks.append((obs_layout in OBS_LAYOUTS, f"env.legged.obs_layout={obs_layout} is not known; use "
+                   + " or ".join(OBS_LAYOUTS) + " (layout.py)"))
     checks.append((legged.fall_height < legged.too_high,
                    f"env.legged.fall_height={legged.fall_height} must be under env.legged.too_high={legged.too_high}"))
     checks.append((legged.gait_period is None or legged.gait_period > 0,

@@ -1,0 +1,204 @@
+"""Issue 59, item 4: env=legged steps only the contacts locomotion needs (env.legged.contacts=terrain, the default:
+the robot's geoms touch the floor and the step only; robots/model.py, filter_contacts) and its physics step is
+chosen by robots/recipe.py's rule (env.legged.physics_dt). Fast: a few Go1 envs, no training."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+
+ROBOTS_DIR = Path(__file__).resolve().parents[1] / "ppo_torchrl" / "assets" / "menagerie"
+GO1 = ROBOTS_DIR / "unitree_go1" / "scene.xml"
+
+
+def go1(*overrides):
+    from ppo_torchrl.compose import compose
+    from ppo_torchrl.envs import make_gym_env
+
+    cfg = compose(["experiment=legged_trot_v2", f"env.xml_file={GO1}", "env.terrain.curriculum=false", *overrides])
+    return make_gym_env(cfg.env)
+
+
+def robot_robot(model, data) -> list:
+    """The contacts between two geoms of bodies that are not welded to the world, as body-name pairs."""
+    return [(model.body(model.geom_bodyid[a]).name, model.body(model.geom_bodyid[b]).name)
+            for a, b in data.contact.geom[: data.ncon]
+            if model.body_weldid[model.geom_bodyid[a]] and model.body_weldid[model.geom_bodyid[b]]]
+
+
+def crossed_legs(model, data, seed=0, tries=500) -> np.ndarray:
+    """A pose (trunk lifted, joints drawn within their ranges) where the model's own contacts put two Go1 legs
+    against each other: Go1's joint ranges keep its thighs off its trunk, but not its legs off each other."""
+    rng = np.random.default_rng(seed)
+    for _ in range(tries):
+        qpos = model.key("home").qpos.copy()
+        qpos[2] = 0.6
+        for joint in range(1, model.njnt):
+            qpos[model.jnt_qposadr[joint]] = rng.uniform(*model.jnt_range[joint])
+        data.qpos[:] = qpos
+        mujoco.mj_forward(model, data)
+        if robot_robot(model, data):
+            return qpos
+    raise AssertionError("no self-colliding pose found")
+
+
+def test_with_the_filter_the_robot_touches_the_terrain_and_never_itself():
+    """Legs that the model's contacts let collide (the pose found with contacts=model) pass through each other
+    with contacts=terrain; random steps make no robot-robot contact (and no trunk-thigh one) while the feet stand
+    on the floor, and a trunk on the floor still counts as a body contact and ends the episode."""
+    env = go1()
+    plain, filtered = go1("env.legged.contacts=model").unwrapped, env.unwrapped
+    assert plain.contact_filter is None and filtered.contact_filter == (42, 0)  # every Go1 geom can touch the floor
+    qpos = crossed_legs(plain.model, plain.data)
+    model, data = filtered.model, filtered.data
+    data.qpos[:] = qpos
+    mujoco.mj_forward(model, data)
+    assert robot_robot(model, data) == []
+
+    env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    trunk = model.body("trunk").id
+    thighs = {model.body(f"{leg}_thigh").id for leg in ("FL", "FR", "RL", "RR")}
+    feet_down = 0
+    for _ in range(200):
+        _, _, terminated, truncated, _ = env.step(np.clip(0.4 * rng.normal(size=12), -1, 1))
+        assert robot_robot(model, data) == []
+        bodies = {frozenset(model.geom_bodyid[g] for g in pair) for pair in data.contact.geom[: data.ncon]}
+        assert not any(trunk in pair and pair & thighs for pair in bodies)
+        feet_down += int(filtered.feet_on_ground().sum())
+        if terminated or truncated:
+            env.reset()
+    assert feet_down > 200  # the feet meet the floor (about 2 of 4 down on average)
+
+    env.reset(seed=0)
+    data.qpos[2], data.qpos[3:7] = 0.04, [0.0, 1.0, 0.0, 0.0]  # upside down, the trunk on the floor
+    mujoco.mj_forward(model, data)
+    _, body_contacts = filtered._contacts()
+    assert body_contacts > 0
+    _, _, terminated, _, info = env.step(np.zeros(12))
+    assert terminated and info["termination"] == "contact: trunk"
+
+
+def test_the_filter_keeps_the_model_s_pairs_and_its_visual_geoms():
+    """A robot-robot <pair> the model names still makes its contact; a visual geom (contype = conaffinity = 0) stays
+    out of every contact; robot geoms still land on the floor."""
+    from ppo_torchrl.robots.model import TERRAIN_BIT, filter_contacts
+
+    spec = mujoco.MjSpec.from_string("""<mujoco><worldbody><geom name="floor" type="plane" size="5 5 .1"/>
+      <body name="trunk" pos="0 0 0.05"><freejoint/><geom name="trunk" type="box" size=".2 .1 .05"/>
+        <geom name="shell" type="sphere" size=".3" contype="0" conaffinity="0" group="2"/>
+        <body name="hip" pos=".25 0 0"><joint type="hinge"/><geom name="hip" type="sphere" size=".06"/>
+          <body name="knee" pos="-.1 0 0"><joint type="hinge"/><geom name="knee" type="sphere" size=".06"/>
+            <body name="toe" pos="-.1 0 0"><joint type="hinge"/><geom name="toe" type="sphere" size=".06"/>
+      </body></body></body></body></worldbody>
+      <contact><pair geom1="trunk" geom2="toe"/></contact></mujoco>""")
+    assert filter_contacts(spec) == (4, 0)
+    model = spec.compile()
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    pairs = {frozenset(model.geom(g).name for g in pair) for pair in data.contact.geom[: data.ncon]}
+    assert frozenset({"trunk", "toe"}) in pairs  # the model's pair (the toe sits inside the trunk's box)
+    assert frozenset({"trunk", "knee"}) not in pairs  # overlapping too, but no pair asks for it
+    assert frozenset({"floor", "trunk"}) in pairs
+    assert not any("shell" in pair for pair in pairs)
+    assert model.geom("shell").contype == model.geom("shell").conaffinity == 0
+    assert model.geom("trunk").contype == TERRAIN_BIT and model.geom("trunk").conaffinity == 0
+
+
+def test_the_filter_changes_nothing_where_the_robot_never_touches_itself():
+    """Flat ground, the same random actions: contacts=terrain steps the same floats as contacts=model (Go1 makes
+    no self-contact there), foot contacts included; the standing pose holds the same."""
+    runs = []
+    for mode in ("model", "terrain"):
+        env = go1(f"env.legged.contacts={mode}")
+        env.reset(seed=3)
+        rng = np.random.default_rng(3)
+        trace = []
+        for _ in range(50):
+            observation, reward, terminated, truncated, _ = env.step(np.clip(0.4 * rng.normal(size=12), -1, 1))
+            trace.append(np.concatenate([observation, [reward], env.unwrapped.feet_on_ground()]))
+            if terminated or truncated:
+                break
+        runs.append(np.array(trace))
+    assert np.array_equal(runs[0], runs[1])
+
+
+def test_the_physics_step_is_the_rule_s_and_a_given_one_wins():
+    """physics_dt null: the rule's step (robots/recipe.py), a whole number of which makes the 20 ms control step;
+    a given physics_dt is set in the model and frame_skip follows it."""
+    from ppo_torchrl.compose import compose
+    from ppo_torchrl.robots.model import read_robot
+    from ppo_torchrl.robots.recipe import physics_dt
+
+    env = go1().unwrapped
+    legged = compose(["experiment=legged_trot_v2", f"env.xml_file={GO1}"]).env.legged
+    assert env.model.opt.timestep == pytest.approx(physics_dt(read_robot(GO1), legged))
+    assert env.model.opt.timestep * env.frame_skip == pytest.approx(0.02)
+    given = go1("env.legged.physics_dt=0.004").unwrapped
+    assert given.model.opt.timestep == pytest.approx(0.004) and given.frame_skip == 5
+    assert given.dt == pytest.approx(0.02)
+
+
+def test_bad_contacts_and_physics_steps_are_refused_by_the_legged_checks():
+    """A step of 0, longer than the control step, or one that does not divide it (0.003 s: 6.67 steps of 20 ms) is
+    one failed check; rule, model and a dividing step pass."""
+    from ppo_torchrl.compose import compose
+    from ppo_torchrl.robots.recipe import legged_checks
+
+    def failed(value):
+        legged = compose(["env=legged", f"env.xml_file={GO1}", f"env.legged.physics_dt={value}"]).env.legged
+        return [message for ok, message in legged_checks(legged) if not ok]
+
+    for bad in ("0", "0.5", "0.003"):
+        assert failed(bad) == [f"env.legged.physics_dt={bad} must be rule, model or a step in seconds that divides "
+                               "env.legged.control_dt=0.02 into whole steps"]
+    for good in ("rule", "model", "0.004"):
+        assert failed(good) == []
+
+
+def test_the_rule_keeps_each_bound_and_a_saved_run_keeps_its_model_s_step():
+    """rule_dt: Spot keeps its 2 ms (its feet's contacts have a 4 ms time constant: a longer step would soften them),
+    Go1 gets 5 ms (its stiffest servo, sqrt(kp / I) ~ 80 rad/s, turns <= 0.5 rad a step); every robot's step divides
+    the control step and meets each bound. A run saved before the key existed (no physics_dt) steps as it trained."""
+    from omegaconf import OmegaConf
+
+    from ppo_torchrl.compose import compose
+    from ppo_torchrl.config import Config
+    from ppo_torchrl.envs import make_gym_env
+    from ppo_torchrl.robots.model import read_robot
+    from ppo_torchrl.robots.recipe import DAMPING_STEP, SERVO_PHASE, rule_dt
+
+    for scene in sorted(ROBOTS_DIR.glob("*/scene.xml")):
+        robot = read_robot(scene)
+        dt = rule_dt(robot, 0.02)
+        assert 0.02 / dt == pytest.approx(round(0.02 / dt)), scene
+        assert dt <= robot.time_constant / 2 + 1e-12 or dt == robot.timestep, scene
+        assert dt * robot.servo_rate <= SERVO_PHASE or dt == robot.timestep, scene
+        assert robot.implicit_damping or dt * robot.damping_rate <= DAMPING_STEP or dt == robot.timestep, scene
+    assert rule_dt(read_robot(ROBOTS_DIR / "boston_dynamics_spot" / "scene.xml"), 0.02) == pytest.approx(0.002)
+    assert rule_dt(read_robot(GO1), 0.02) == pytest.approx(0.005)
+
+    cfg = compose(["experiment=legged_trot_v2", f"env.xml_file={GO1}"])
+    saved = OmegaConf.create(OmegaConf.to_container(cfg))  # as a run dir's config.yaml is read back
+    del saved.env.legged["physics_dt"]
+    old = OmegaConf.merge(OmegaConf.structured(Config), saved)  # config.run_config's merge
+    assert make_gym_env(old.env).unwrapped.model.opt.timestep == pytest.approx(read_robot(GO1).timestep)
+
+
+@pytest.mark.parametrize("override, expected", [
+    ("env.legged.contacts=sideways", "env.legged.contacts=sideways is not known; use terrain or model"),
+    ("env.legged.physics_dt=fast", "env.legged.physics_dt=fast must be rule, model or a step in seconds"),
+])
+def test_a_bad_contacts_or_physics_step_is_one_error_line_and_exit_2(override, expected, tmp_path):
+    done = subprocess.run([sys.executable, "-m", "ppo_torchrl", "env=legged", f"env.xml_file={GO1}", override,
+                           f"hydra.run.dir={tmp_path / 'run'}"], cwd=tmp_path, capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 2, done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error:") and expected in lines[0], done.stderr
+    assert not (tmp_path / "run").exists()
