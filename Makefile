@@ -9,11 +9,15 @@ STAMP := $(VENV)/.installed
 setup: $(STAMP)
 
 # The CPU wheel of torch first and pinned: an unpinned torch would pull several GB of CUDA packages.
+# A GPU machine: TORCH="torch==2.13.0 --index-url <CUDA wheel index>"; offline: PIP_FLAGS="--no-index --find-links <dir>"
+# (docs/speed.md, "On a GPU").
+TORCH ?= torch==2.13.0
+PIP_FLAGS ?=
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet torch==2.13.0
-	$(PY) -m pip install --quiet -e ".[test,loggers,sweeps]"
+	$(PY) -m pip install --quiet --upgrade pip $(PIP_FLAGS) || test -n "$(PIP_FLAGS)"
+	$(PY) -m pip install --quiet $(PIP_FLAGS) $(TORCH)
+	$(PY) -m pip install --quiet $(PIP_FLAGS) -e ".[test,loggers,sweeps]"
 	touch $(STAMP)
 
 # make exits 2 whenever a recipe fails; a run stopped by a signal (exit 128 + n: Ctrl-C 130) stops make by
@@ -43,8 +47,9 @@ trot: $(STAMP)
 
 # A robot read from its model under the legged recipe (issue 46): experiment=legged_trot on XML in ROBOT_DIR
 # (resumed when a kill stopped it, kept when finished), then its height sweep from the last checkpoint,
-# EPISODES per height at HEIGHTS (in leg lengths l) on episode seeds SWEEP_SEED * 1000 + i, in ROBOT_DIR/sweep.
-#   make robot XML=../shared/robots/unitree_a1/scene.xml SEED=11 ROBOT_DIR=results/robots/<date>/a1 SWEEP_SEED=<s>
+# EPISODES per height at HEIGHTS (in leg lengths l) on episode seeds SWEEP_SEED * 1000 + i, in ROBOT_DIR/sweep,
+# then the run's records (metrics.csv.xz; results/README.md). XML: a path, or a shipped model (menagerie/<robot>/scene.xml).
+#   make robot XML=menagerie/unitree_a1/scene.xml SEED=11 ROBOT_DIR=results/robots/<date>/a1 SWEEP_SEED=<s>
 HEIGHTS ?= 0,0.2l,0.25l,0.3l
 EPISODES ?= 100
 robot: $(STAMP)
@@ -53,10 +58,14 @@ robot: $(STAMP)
 	$(call stage,$(ROBOT_DIR),experiment=legged_trot env.xml_file=$(XML) seed=$(SEED) logger=csv $(ARGS))
 	$(PY) -m ppo_torchrl.evaluate run=$(ROBOT_DIR) checkpoint=last episodes=$(EPISODES) seed=$(SWEEP_SEED) \
 		heights=$(HEIGHTS) out=$(ROBOT_DIR)/sweep
+	$(PY) -m ppo_torchrl.records $(ROBOT_DIR)/metrics.csv $(ROBOT_DIR)/sweep/height_sweep.json \
+		$(ROBOT_DIR)/sweep/height_sweep_episodes.csv
 
 # stage(run dir, overrides): start the run there, resume it when a run there stopped, skip it when it finished.
+# A run committed mid-way to results/ holds metrics.csv.xz only: its metrics.csv comes back before the resume.
 stage = if grep -qs '"status": "finished"' $(1)/summary.json; then echo "$(1): finished"; \
-	elif [ -d $(1) ]; then MUJOCO_GL=egl $(PY) -m ppo_torchrl resume=$(1); \
+	elif [ -d $(1) ]; then { [ -f $(1)/metrics.csv ] || [ ! -f $(1)/metrics.csv.xz ] || xz -dk $(1)/metrics.csv.xz; } && \
+		MUJOCO_GL=egl $(PY) -m ppo_torchrl resume=$(1); \
 	else MUJOCO_GL=egl $(PY) -m ppo_torchrl $(2) hydra.run.dir=$(1); fi
 
 bench: $(STAMP)

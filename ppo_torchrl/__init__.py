@@ -24,3 +24,12 @@ if sys.argv[:1] == ["-m"]:
     guarded(check_interpreter)  # the system Python, not the project's: one line before the heavy imports fail
 
 __version__ = "0.1.0"
+__all__ = ["train", "load", "evaluate_run", "Run", "Policy"]
+
+
+def __getattr__(name: str):
+    """The Python API (api.py), imported on first use (PEP 562): `python -m ppo_torchrl ...` does not pay for it,
+    and the package's root imports none of its modules (each module may import the package's others)."""
+    if name in __all__:
+        return getattr(importlib.import_module("ppo_torchrl.api"), name)
+    raise AttributeError(f"module 'ppo_torchrl' has no attribute {name!r}")

@@ -220,6 +220,9 @@ class PolicyConfig:
     std: str = "state_independent"
     log_std_init: float = 0.0
     std_min: float = 0.0  # floor added under the std; 0 disables it
+    # A cap on the std (std_min included): the learned std stops there, and so does the entropy bonus's pull on
+    # it (no gradient past the cap). null: no cap (an entropy bonus can grow the std without bound).
+    std_max: Optional[float] = None
     # Hidden layers of the actor (and of the shared trunk) and of the critic: their number and widths.
     hidden_sizes: List[int] = field(default_factory=lambda: [64, 64])
     critic_hidden_sizes: List[int] = field(default_factory=lambda: [64, 64])

@@ -42,7 +42,9 @@ class DeployedPolicy(nn.Module):
         return to_bounds(self.policy_net(self.normalize(obs).float())[0], self.low, self.high, self.squash)
 
 
-def export_policy(cfg, ac: ActorCritic, obs_stats: Optional[dict], path: Path, owner: Optional[Path] = None) -> Path:
+def deployed_policy(cfg, ac: ActorCritic, obs_stats: Optional[dict]) -> DeployedPolicy:
+    """The run's policy as one module: a raw observation in, the deterministic action out (what policy.pt holds,
+    and what the Python API's `load(...).predict` runs)."""
     t = cfg.env.transforms
     if t.extra:  # a user's TorchRL transform (CatFrames keeps a frame buffer) cannot be baked in here
         target = t.extra[0].get("_target_", "?")
@@ -52,7 +54,12 @@ def export_policy(cfg, ac: ActorCritic, obs_stats: Optional[dict], path: Path, o
     normalizer = make_observation_normalizer(t, obs_dim, obs_stats, frozen=True)
     if obs_stats is None:
         normalizer.enabled = False
-    module = DeployedPolicy(ac, normalizer.module()).eval()
+    return DeployedPolicy(ac, normalizer.module()).eval()
+
+
+def export_policy(cfg, ac: ActorCritic, obs_stats: Optional[dict], path: Path, owner: Optional[Path] = None) -> Path:
+    module = deployed_policy(cfg, ac, obs_stats)
+    obs_dim = ac.policy_net[0][0].in_features
     example = torch.zeros(2, obs_dim)
     with torch.no_grad():
         scripted = torch.jit.trace(module, example)

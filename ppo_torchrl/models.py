@@ -55,6 +55,8 @@ class GaussianParams(nn.Module):
         self.loc = _init_linear(nn.Linear(in_dim, action_dim), cfg.policy_head_gain, cfg.ortho_init)
         self.state_dependent = cfg.std == "state_dependent"
         self.std_min = float(cfg.std_min)
+        std_max = cfg.get("std_max") if hasattr(cfg, "get") else getattr(cfg, "std_max", None)
+        self.std_cap = None if std_max is None else float(std_max) - self.std_min  # on the learned part
         if self.state_dependent:
             self.scale = _init_linear(nn.Linear(in_dim, action_dim), cfg.policy_head_gain, cfg.ortho_init)
             # softplus(bias) = exp(log_std_init) at start, like the state-independent default
@@ -69,6 +71,8 @@ class GaussianParams(nn.Module):
             scale = nn.functional.softplus(self.scale(features))
         else:
             scale = self.log_std.exp().expand_as(loc)
+        if self.std_cap is not None:
+            scale = scale.clamp(max=self.std_cap)
         if self.std_min > 0:
             scale = scale + self.std_min
         return loc, scale
@@ -97,6 +101,9 @@ def validate_policy_config(cfg) -> None:
         raise ConfigError(f"policy.width={cfg.width} must be a positive width (or null)")
     if cfg.std_min < 0:
         raise ConfigError(f"policy.std_min={cfg.std_min} must be >= 0")
+    std_max = cfg.get("std_max")
+    if std_max is not None and not std_max > cfg.std_min:
+        raise ConfigError(f"policy.std_max={std_max} must be above policy.std_min={cfg.std_min} (or null: no cap)")
 
 
 def make_actor_critic(cfg, spec: EnvSpec, device: torch.device | str = "cpu") -> ActorCritic:
@@ -197,11 +204,15 @@ class NumpyPolicy:
                 self.layers.append(NUMPY_ACTIVATIONS[type(module)])
             else:  # GaussianParams
                 self.loc_head = linear(module.loc)
-                if module.state_dependent:
+                cap = np.inf if module.std_cap is None else module.std_cap
+                if module.state_dependent and module.std_cap is None:
                     scale_head, std_min = linear(module.scale), module.std_min
                     self.scale_head = lambda x: np.logaddexp(0, scale_head(x)) + std_min
+                elif module.state_dependent:
+                    scale_head, std_min = linear(module.scale), module.std_min
+                    self.scale_head = lambda x: np.minimum(np.logaddexp(0, scale_head(x)), cap) + std_min
                 else:  # the same std for every observation: computed once here
-                    scale = module.log_std.detach().exp().cpu().numpy() + module.std_min
+                    scale = np.minimum(module.log_std.detach().exp().cpu().numpy(), cap) + module.std_min
                     self.scale_head = lambda x: scale
 
     def loc_scale(self, obs: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:

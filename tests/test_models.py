@@ -151,3 +151,22 @@ def test_evaluate_and_the_exported_policy_act_alike_to_the_bit(tmp_path):
     exported = torch.jit.load(str(export_policy(cfg, ac, stats, tmp_path / "policy.pt")))(obs)
     assert (evaluated.abs() > 0.999).float().mean() > 0.5
     assert torch.equal(evaluated, exported)
+
+
+def test_std_max_caps_the_std_on_every_face_and_stops_the_entropy_pull():
+    """policy.std_max (recipe v2's exploration cap): the torch net, the numpy copy the fast collector samples with,
+    and the gradient of an entropy bonus past the cap (none: the std cannot grow without bound)."""
+    from ppo_torchrl.errors import ConfigError
+
+    for std in ("state_independent", "state_dependent"):
+        ac = build("policy.std=" + std, "policy.log_std_init=0.5", "policy.std_min=0.1", "policy.std_max=0.6")
+        obs = torch.randn(5, SPEC.obs_dim)
+        loc, scale = ac.policy_net(obs)
+        assert torch.allclose(scale, torch.full_like(scale, 0.6))  # exp(0.5) + 0.1 = 1.75, capped at 0.6
+        _, np_scale = NumpyPolicy.from_actor(ac.actor).loc_scale(obs.numpy())
+        assert np.allclose(np_scale, 0.6)
+        scale.log().sum().backward()  # an entropy bonus's pull on the std
+        grads = [p.grad for n, p in ac.policy_net.named_parameters() if "std" in n or "scale" in n]
+        assert grads and all(g is None or not g.any() for g in grads)
+    with pytest.raises(ConfigError, match="std_max"):
+        build("policy.std_min=0.2", "policy.std_max=0.1")
