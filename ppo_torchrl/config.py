@@ -285,7 +285,9 @@ class CollectorConfig:
     num_envs: int = 1
     # torchrl: torchrl.collectors.Collector over TransformedEnv(GymWrapper), the reference pipeline;
     # fast: the same pipeline's math in a lean numpy loop over the same gymnasium envs (same batch keys,
-    # same statistics); auto: fast unless env.transforms.extra asks for TorchRL transforms.
+    # same statistics); auto: fast unless env.transforms.extra asks for TorchRL transforms; envpool (an option,
+    # the `envpool` extra): fast's loop over EnvPool, the Gymnasium MuJoCo ids stepped in C++ (a resume starts
+    # new episodes: collectors/envpool_backend.py).
     backend: str = "auto"
     # Worker processes, each stepping num_envs envs built from this config: > 1 runs TorchRL's
     # MultiSyncCollector (collectors/multiprocess.py). A batch stays frames_per_batch on-policy frames

@@ -115,7 +115,12 @@ def show(value) -> str:
 
 
 def describe_resume(run_dir, frames: int, cfg) -> str:
-    return f"resumed {run_dir} at frame {frames:,} of {frame_budget(cfg)[1]:,}"
+    limit = ""
+    if cfg.collector.backend == "envpool":
+        from ppo_torchrl.collectors.envpool_backend import RESUME_LIMIT
+
+        limit = f" ({RESUME_LIMIT})"
+    return f"resumed {run_dir} at frame {frames:,} of {frame_budget(cfg)[1]:,}{limit}"
 
 
 def duration(seconds: float) -> str:

@@ -1,11 +1,13 @@
 """Collectors: TorchRL collectors, at three scales, and the app's view of them.
 
-Two TorchRL collector classes step the one env of `envs.make_torchrl_env` (TransformedEnv(GymWrapper)):
+Three TorchRL collector classes step the one env of `envs.make_torchrl_env` (TransformedEnv(GymWrapper)):
 - `FastCollector` (fast.py): a `torchrl.collectors.Collector` whose rollout steps the Gymnasium envs in
   numpy with the env's own normalization; the default;
 - TorchRL's own `Collector`, which runs the transforms per step and so takes any TorchRL transform
-  (`env.transforms.extra`).
-Either runs in one process, in `collector.workers` processes (TorchRL's `MultiSyncCollector`) or on Ray
+  (`env.transforms.extra`);
+- `EnvpoolCollector` (envpool_backend.py, `collector.backend=envpool`): FastCollector's loop over EnvPool's
+  C++ envs, an option.
+Each runs in one process, in `collector.workers` processes (TorchRL's `MultiSyncCollector`) or on Ray
 (`collector.distributed=ray`: `RayCollector`), each taking it as `collector_class` (collection.py).
 `Collection` is what the trainer sees: batches [envs, steps], finished episodes, statistics, state.
 """

@@ -12,7 +12,8 @@ from ppo_torchrl.errors import ConfigError
 # collector.backend -> (module, class, the policy it steps: "actor" (it reads the actor's net, distribution and
 # bounds) or "sampling" (models.sampling_policy: the lean draw), the name the start line gives it)
 BACKENDS = {"fast": ("ppo_torchrl.collectors.fast", "FastCollector", "actor", "FastCollector"),
-            "torchrl": ("ppo_torchrl.collectors.torchrl_path", "TorchRLCollector", "sampling", "torchrl.Collector")}
+            "torchrl": ("ppo_torchrl.collectors.torchrl_path", "TorchRLCollector", "sampling", "torchrl.Collector"),
+            "envpool": ("ppo_torchrl.collectors.envpool_backend", "EnvpoolCollector", "actor", "EnvpoolCollector")}
 CHOICES = ("auto", *BACKENDS)  # collector.backend
 # TorchRL's Collector against FastCollector, whole-process frames/s on Hopper-v4 by collector.num_envs
 # (benchmarks/speed.py --backends fast,torchrl --envs 1,8,16: results/speed/torchrl_path_2026-11-27.txt):
@@ -25,6 +26,10 @@ def resolve_backend(cfg) -> str:
     backend, extra = cfg.collector.backend, bool(cfg.env.transforms.extra)
     if backend == "auto":
         return "torchrl" if extra else "fast"
+    if backend == "envpool":  # an option: C++ env steps (collectors/envpool_backend.py)
+        from ppo_torchrl.collectors.envpool_backend import check_envpool
+
+        check_envpool(cfg)
     if backend == "fast" and extra:
         raise ConfigError("env.transforms.extra needs collector.backend=torchrl (or auto): the fast collector "
                           "runs no TorchRL transform per step")
@@ -38,6 +43,8 @@ def describe_backend(cfg) -> Tuple[str, str]:
     name = BACKENDS[path][3]
     if path == "fast":
         why = "no env.transforms.extra" if c.backend == "auto" else "collector.backend=fast"
+    elif path == "envpool":
+        why = "collector.backend=envpool: the envs stepped in C++ by EnvPool"
     else:
         why = "env.transforms.extra runs per step" if c.backend == "auto" else "collector.backend=torchrl"
         measured = max([n for n in TORCHRL_PATH_SHARE if n <= c.num_envs] or [1])

@@ -55,7 +55,7 @@ class Collection:
     def __init__(self, cfg, ac, seed: int, device: torch.device):
         c = cfg.collector
         backend = resolve_backend(cfg)
-        self.fast = backend == "fast"
+        self.fast = backend != "torchrl"  # FastCollector or its subclass (envpool): seeded here
         self.multi = c.workers > 1 or bool(c.distributed)
         collector_class, steps = collector_class_of(backend)  # the classes registered in collectors/choice.py
         policy = ac.actor if steps == "actor" else sampling_policy(ac)  # FastCollector reads the actor's net

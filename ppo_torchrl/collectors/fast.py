@@ -118,6 +118,12 @@ class FastCollector(Collector):
             rew_buf[t] = scale_rewards(reward, term_buf[t] | trunc_buf[t])
         self._obs = obs
         self.env_state.emit(obs)
+        return self._fill(obs_buf, act_buf, traj_buf, next_buf, rew_buf, term_buf, trunc_buf, ep_return, ep_length)
+
+    def _fill(self, obs_buf, act_buf, traj_buf, next_buf, rew_buf, term_buf, trunc_buf, ep_return, ep_length):
+        """The batch in TorchRL's layout and keys, [num_envs, steps], from the rollout's [steps, num_envs] buffers,
+        written into the one output TensorDict."""
+        n, steps = self.num_envs, self.steps
 
         def tensor(x: np.ndarray) -> torch.Tensor:  # [steps, n, ...] -> [n, steps, ...]
             return torch.from_numpy(np.ascontiguousarray(np.swapaxes(x, 0, 1)))
