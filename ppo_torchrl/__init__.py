@@ -22,6 +22,9 @@ if sys.argv[:1] == ["-m"]:
 
     install_for_startup()
     guarded(check_interpreter)  # the system Python, not the project's: one line before the heavy imports fail
+    from ppo_torchrl.usage import answer_help
+
+    answer_help(sys.orig_argv)  # evaluate --help, export --help: the page before torch is imported
 
 __version__ = "0.1.0"
 __all__ = ["train", "load", "evaluate_run", "Run", "Policy"]

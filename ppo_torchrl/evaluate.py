@@ -32,6 +32,7 @@ from ppo_torchrl.envs import env_checks, env_label, episode_seeds, make_torchrl_
 from ppo_torchrl.filming import VIDEO_SIZE, EpisodeProgress, Filming, video_line
 from ppo_torchrl.env_state import env_state_of
 from ppo_torchrl.errors import ConfigError
+from ppo_torchrl.locks import read, releasing
 from ppo_torchrl.robots.env import LocomotionEnv
 from ppo_torchrl.robots.gait import FOOT_PAIRS
 from ppo_torchrl.models import ActorCritic, deterministic_policy
@@ -419,40 +420,20 @@ def height_sweep(cfg, ac, obs_stats, heights: list[float], episodes: int, seed: 
     return rows
 
 
+@releasing  # the shared locks it takes (locks.read) go when it ends
 def main(argv: list[str]) -> dict:
     from ppo_torchrl.checkpoint import check_same_env, check_spec, load_policy, resolve_checkpoint
     from ppo_torchrl.checkpoint import label as checkpoint_label
     from ppo_torchrl.cli import parse_args, resolve_run
     from ppo_torchrl.envs import env_spec
+    from ppo_torchrl.model_record import check_model
     from ppo_torchrl.ownership import holder
     from ppo_torchrl.rundir import atomic_write_json, check_replaceable, intend, output_dir_for, record, unwritable
+    from ppo_torchrl.usage import EVALUATE
 
-    usage = ("python -m ppo_torchrl.evaluate run=<run dir> [checkpoint=best|last|<file>] [episodes=10] [video=false] "
-             "[video_episodes=0] [video_length=<s>] [seed=0] [heights=<m,m,...> [out=<dir>]] [env.<key>=<value> ...]")
-    help = {
-        "run": "the run dir to evaluate (one with checkpoints/), or latest, or latest/<env>: the newest run under outputs/",
-        "checkpoint": "best, last, or a checkpoint file",
-        "episodes": "number of deterministic episodes (per height with heights=)",
-        "video": "also film the first episode: <run dir>/eval/<checkpoint>.mp4, real-time speed, the camera following "
-                 "the robot (MUJOCO_GL=egl)",
-        "video_episodes": "the episodes to film, numbered from 0, e.g. 0 or 0,3: one after the other in one mp4 "
-                          "(implies video=true)",
-        "video_length": "at most this many seconds of video in all, which is simulated time as videos play in real "
-                        "time; empty: whole episodes (implies video=true)",
-        "seed": "episode i starts from seed * 1000 + i: the same seed replays the same episodes",
-        "heights": "step heights in m, e.g. 0,0.05,0.1,0.15,0.2, or in leg lengths for env=legged, 0,0.2l,0.25l,0.3l: evaluate at each; writes height_sweep.csv and the "
-                   "success-rate curve height_sweep.png",
-        "out": "where the eval writes its files: eval.json, the video, a height sweep's (empty: <run dir>/eval)",
-    }
-    about = ("Runs the policy deterministically on a fresh env with the run's frozen normalization stats, prints\n"
-             "mean +- std return and length (MJCF robots: forward velocity, gait figures; step envs: the share of\n"
-             "episodes that cross) and writes <run dir>/eval/eval.json.\n"
-             "env.<key>=<value> changes the run's env config for this evaluation, e.g. env.terrain.step_height=0.1\n"
-             "(a step height in m) or env.xml_file=quadruped_step.xml (a flat-ground run on the step).")
+    usage, spec, help, about = EVALUATE  # usage.py: --help answers before torch is imported
     overrides = [arg for arg in argv if arg.startswith("env.")]
-    args = parse_args([arg for arg in argv if not arg.startswith("env.")],
-                      {"run": None, "checkpoint": "best", "episodes": 10, "video": False, "video_episodes": "0",
-                       "video_length": "", "seed": 0, "heights": "", "out": ""}, usage, help, about)
+    args = parse_args([arg for arg in argv if not arg.startswith("env.")], spec, usage, help, about)
     if args["episodes"] < 1:
         raise ConfigError(f"episodes={args['episodes']} must be >= 1")
     if args["episodes"] > MAX_EPISODES:
@@ -466,8 +447,10 @@ def main(argv: list[str]) -> dict:
         args["video"] = True
     video_episodes, video_length = parse_video_choices(args["video_episodes"], args["video_length"], args["episodes"])
     if heights and args["video"]:
-        raise ConfigError("video=true films one evaluation; leave it out of a heights= sweep")
+        raise ConfigError("video=true films one evaluation, not a heights= sweep: film each height with a command of "
+                          "its own, env.terrain.step_height=<m> video=true (e.g. env.terrain.step_height=0.1 video=true)")
     run_dir = resolve_run(args["run"])  # run=latest[/<env>]: the newest run dir under outputs/
+    read(run_dir)  # a shared lock: no overwrite or run starts there while this reads it (locks.py)
     checkpoint = resolve_checkpoint(run_dir, args["checkpoint"])  # best without a best.pt: last.pt, said so
     which = checkpoint_label(checkpoint)
     out_dir = Path(args["out"]) if args["out"] else output_dir_for(run_dir, run_dir / "eval")  # zoo: outputs/zoo/<name>
@@ -477,10 +460,13 @@ def main(argv: list[str]) -> dict:
     video = out_dir / f"{which}.mp4"
     writes = [out_dir / name for name in SWEEP_FILES] if heights else [out_dir / "eval.json"] + [video] * args["video"]
     check_replaceable(run_dir, writes)  # a file there that the app did not write is left alone: one line
+    read(holder(out_dir))  # out= in another run dir: that one is read (and written) too
     cfg, ac, state = load_policy(run_dir, str(checkpoint))
     filed_in = holder(writes[0]) or (None if args["out"] else run_dir)  # the run whose dir gets the results
     if filed_in is not None:
         check_same_env(filed_in, cfg, args["checkpoint"])
+    if not any(o.startswith("env.xml_file=") for o in overrides):  # another model on purpose: not compared
+        check_model(state, cfg.env, f"run={run_dir}")  # the robot model it trained on, unchanged
     if overrides:
         cfg = apply_overrides(cfg, overrides)
         check_spec(state, env_spec(cfg.env), cfg.env.id)

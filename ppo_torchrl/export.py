@@ -18,6 +18,7 @@ import torch
 from torch import nn
 
 from ppo_torchrl.errors import ConfigError
+from ppo_torchrl.locks import read, releasing
 from ppo_torchrl.models import ActorCritic, to_bounds
 from ppo_torchrl.normalization import make_observation_normalizer
 from ppo_torchrl.rundir import atomic_write_bytes
@@ -67,19 +68,17 @@ def export_policy(cfg, ac: ActorCritic, obs_stats: Optional[dict], path: Path, o
     return path
 
 
+@releasing  # the shared lock it takes (locks.read) goes when it ends
 def main(argv: list[str]) -> Path:
     from ppo_torchrl.checkpoint import label, load_policy, resolve_checkpoint
     from ppo_torchrl.cli import parse_args, resolve_run
     from ppo_torchrl.rundir import check_replaceable, is_run, output_dir_for, record, unwritable
+    from ppo_torchrl.usage import EXPORT
 
-    usage = "python -m ppo_torchrl.export run=<run dir> [checkpoint=best|last|<file>]"
-    help = {"run": "the run dir whose policy is exported (or latest, latest/<env>); writes <run dir>/policy.pt (for a "
-                   "shipped zoo/ folder: outputs/zoo/<name>/policy.pt)",
-            "checkpoint": "best, last, or a checkpoint file"}
-    about = ("Writes the policy as TorchScript: a raw observation in, the deterministic action within the bounds\n"
-             "out, normalization baked in; it runs with torch alone: torch.jit.load('policy.pt')(obs).")
-    args = parse_args(argv, {"run": None, "checkpoint": "best"}, usage, help, about)
+    usage, spec, help, about = EXPORT  # usage.py: --help answers before torch is imported
+    args = parse_args(argv, spec, usage, help, about)
     run_dir = resolve_run(args["run"])  # run=latest[/<env>]: the newest run dir under outputs/
+    read(run_dir)  # a shared lock: no overwrite or run starts there while this reads it (locks.py)
     checkpoint = resolve_checkpoint(run_dir, args["checkpoint"])  # best without a best.pt: last.pt, said so
     target = output_dir_for(run_dir, run_dir) / "policy.pt"  # a shipped zoo folder: outputs/zoo/<name>/policy.pt
     check_replaceable(run_dir, [target])  # a policy.pt the app did not write is left alone

@@ -206,8 +206,11 @@ class Progress:
                                f"{row['eval/return_std']:.1f}")
             return
         now = time.perf_counter()
+        step = now - self._seen[-1][0] if self._seen else 0.0  # the last iteration's time: the next comes about then
         self._seen.append((now, row["frames"]))
-        if force or "eval" in stats or now - self._last >= self.every_s:
+        # now, when the next line would come later than every_s after the last one: lines at most every_s apart
+        # (a longer iteration: a line each)
+        if force or "eval" in stats or now - self._last + step > self.every_s:
             self._last = now
             parts = [f"frames {row['frames']:>9d}/{self.total}", f"sps {row['sps']:6.0f}"]
             if "return" in stats:

@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Dict, List
 
 from ppo_torchrl.errors import ConfigError
+from ppo_torchrl.locks import read, releasing
 from ppo_torchrl.records import has_record, open_record
 from ppo_torchrl.rundir import atomic_write_bytes, check_replaceable, is_run, record, unwritable
 
@@ -79,6 +80,25 @@ def last100_label(m: Dict[str, List[float]]) -> str:
     return f"{label} (at the end they span the last {span:,.0f} frames, so it lags)"
 
 
+def episode_kinds(run_dir: Path) -> tuple:
+    """What the train and eval curves' episodes are, where they differ in kind (a step env whose training draws
+    the step's height, on a curriculum or from a range, while its eval has one fixed step: their returns are not
+    comparable): (train words, eval words) for the legend, ("", "") otherwise or without a readable config.yaml."""
+    try:
+        from omegaconf import OmegaConf
+
+        terrain = OmegaConf.load(Path(run_dir) / "config.yaml").env.get("terrain")
+        if terrain is None or terrain.get("step_height") is not None or terrain.get("step_height_range") is None:
+            return "", ""
+        low, high = (float(h) * 100 for h in terrain.step_height_range)
+        fixed = terrain.get("eval_step_height")
+    except Exception:  # noqa: BLE001 - no config.yaml, or a damaged one: the plain labels
+        return "", ""
+    drawn = f"the curriculum's steps, {low:g}-{high:g} cm" if terrain.get("curriculum") else f"steps of {low:g}-{high:g} cm"
+    return (f"\n  (on {drawn}; episodes end early at a fall)",
+            f" (one fixed step of {float(fixed) * 100:g} cm)" if fixed is not None else " (the model file's step)")
+
+
 def run_figure(run_dir: Path):
     """The run's figure: returns against frames on top, the PPO diagnostics below."""
     import matplotlib
@@ -95,13 +115,15 @@ def run_figure(run_dir: Path):
     fig = plt.figure(figsize=(14, 9), constrained_layout=True)
     grid = fig.add_gridspec(3, 3)
     ax = fig.add_subplot(grid[0, :])
-    ax.plot(frames, m["train/episode_return"], alpha=0.35, label="train: mean of the episodes finished in each iteration")
-    ax.plot(frames, m["train/return_last100"], label=last100_label(m))
+    train_kind, eval_kind = episode_kinds(run_dir)  # a curriculum's training episodes are not the eval's
+    ax.plot(frames, m["train/episode_return"], alpha=0.35,
+            label="train: mean of the episodes finished in each iteration" + train_kind)
+    ax.plot(frames, m["train/return_last100"], label=last100_label(m) + train_kind)
     evals = ~np.isnan(np.asarray(m["eval/return_mean"]))
     if evals.any():  # markers, not a line: evals are a few points, and one alone must show
         mean, std = np.asarray(m["eval/return_mean"])[evals], np.asarray(m["eval/return_std"])[evals]
         ax.errorbar(frames[evals], mean, yerr=std, fmt="o", markersize=6, capsize=4,
-                    label="eval: deterministic, mean +- std over its episodes")
+                    label="eval: deterministic, mean +- std over its episodes" + eval_kind)
     ax.set(xlabel="frames", ylabel="raw episode return")
     ax.legend(loc="best")
     ax.grid(alpha=0.3)
@@ -239,6 +261,7 @@ def plot_sweep(sweep_dir: Path) -> List[Path]:
     return [png, md_path, csv_path]
 
 
+@releasing  # the shared lock it takes (locks.read) goes when it ends
 def main(argv: List[str]) -> List[Path]:
     """A run dir gets report.png; a multirun (sweep) dir gets sweep_report.{png,md,csv}."""
     usage = "python -m ppo_torchrl.report <run dir or sweep dir | latest | latest/<env>>"
@@ -258,6 +281,7 @@ def main(argv: List[str]) -> List[Path]:
     target = resolve_run(argv[0].removeprefix("run="))  # [run=]latest[/<env>]: the newest run dir under outputs/
     if not target.is_dir():
         raise ConfigError(f"{target} is not a directory")
+    read(target)  # a shared lock: no overwrite or run starts there while this reads it (locks.py)
     why = unwritable(target)
     if why:
         raise ConfigError(f"cannot write the report into {target}: {why}; copy the dir somewhere writable and run it there")

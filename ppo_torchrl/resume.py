@@ -22,6 +22,7 @@ def check_resume(resume: str, overrides: list[str]) -> Path:
     """`resume=<dir>` must be a run dir with a checkpoint that has frames left to train."""
     from ppo_torchrl import checkpoint
     from ppo_torchrl.config import resume_config
+    from ppo_torchrl.model_record import check_model
     from ppo_torchrl.rundir import ASIDE, shipped
     from ppo_torchrl.validation import check_frames_left, validate_config
 
@@ -46,5 +47,6 @@ def check_resume(resume: str, overrides: list[str]) -> Path:
     state = checkpoint.load(run_dir / "checkpoints" / checkpoint.LAST)
     cfg = resume_config(run_dir, [o for o in overrides if not o.startswith("resume=")], state, announce=True)
     validate_config(cfg)
+    check_model(state, cfg.env, f"resume={run_dir}")  # the robot model it trained on, unchanged
     check_frames_left(run_dir, state["frames"], cfg.collector.total_frames, state)
     return run_dir

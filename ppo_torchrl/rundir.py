@@ -15,7 +15,8 @@
   at any instant leaves the old run whole, in its dir or in the sibling.
 - `resume=<dir>` continues the run in its own dir.
 - A lock on the dir itself (`flock` of its file descriptor: released even by kill -9, no file
-  written) stops a second process from writing into a dir in use; the refusal names the holder.
+  written) stops a second process from writing into a dir in use; the refusal names the holder. It is
+  exclusive; evaluate, export and report hold it shared while they read the dir (locks.py).
 
 `claim()` runs before Hydra or the app writes anything, so a refused command changes nothing.
 """
@@ -34,6 +35,7 @@ from pathlib import Path
 from typing import Dict, List, Optional
 
 from ppo_torchrl.errors import ConfigError, EnvironmentFault
+from ppo_torchrl.locks import holder as _holder
 from ppo_torchrl.ownership import MANIFEST, digest, holder, inside_run, relative, walk
 
 STASH = ".replaced"  # earlier versions moved an overwritten run's files here; one left by a kill is moved aside whole
@@ -322,20 +324,6 @@ def check_new_dir(directory: Path, overwrite: bool, what: str = "run") -> None:
                           "or replace it with overwrite=true")
 
 
-def _holder(directory: Path) -> str:
-    """The pid that holds the dir's lock, from /proc/locks (Linux), or 'another process'."""
-    try:
-        st = os.stat(directory)
-        dev = f"{os.major(st.st_dev):02x}:{os.minor(st.st_dev):02x}:{st.st_ino}"
-        for line in Path("/proc/locks").read_text().splitlines():
-            parts = line.split()
-            if "FLOCK" in parts and parts[-3] == dev:
-                return f"pid {parts[-4]}"
-    except (OSError, IndexError, ValueError):
-        pass
-    return "another process"
-
-
 def lock(directory: Path) -> None:
     """Take the dir's lock for this process, or fail naming the process that holds it."""
     directory = Path(directory).resolve()
@@ -372,7 +360,8 @@ def output_dir_for(directory: Path, default: Path) -> Path:
 
 
 def in_use(directory: Path) -> bool:
-    """Another process holds the dir's lock (a run still training there); leaves the lock as it was."""
+    """Another process writes there (a run still training: its lock is exclusive; a reader's shared lock, an
+    evaluate's, is not asked); leaves the lock as it was."""
     directory = Path(directory).resolve()
     if directory in _held:
         return False
@@ -381,7 +370,7 @@ def in_use(directory: Path) -> bool:
     except OSError:
         return False
     try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
         fcntl.flock(fd, fcntl.LOCK_UN)
         return False
     except BlockingIOError:

@@ -34,6 +34,7 @@ from ppo_torchrl.loggers import (COLUMNS, MetricsFile, Progress, amend_last_row,
                                  truncate_logs)
 from ppo_torchrl.losses import LOSS_INPUT_KEYS, LOSS_METRICS, NOT_COMPILABLE, make_loss, make_optimizer
 from ppo_torchrl.minibatch import make_minibatch_step
+from ppo_torchrl.model_record import model_record
 from ppo_torchrl.models import make_actor_critic
 from ppo_torchrl.signals import ON_DISK, Interrupt, StopRequest
 from ppo_torchrl.validation import check_frames_left, resolve_device, validate_config
@@ -82,6 +83,7 @@ class Trainer:
         self.cfg = cfg
         self.run_dir = Path(run_dir)
         self.run_dir.mkdir(parents=True, exist_ok=True)
+        self.model = model_record(cfg.env)  # the robot model it trains on, in every checkpoint (model_record.py)
         ON_DISK.__init__(run_dir=self.run_dir, total_frames=startup.frame_budget(cfg)[1])  # what this run has saved: nothing yet
         torch.set_num_threads(cfg.torch_threads)
         self.device = resolve_device(cfg.device)
@@ -429,6 +431,7 @@ class Trainer:
             "iteration": self.iteration,
             "lr_schedule": list(self.lr_anchor),
             "spec": {"obs_dim": self.spec.obs_dim, "action_dim": self.spec.action_dim},
+            "model": self.model,
             "rng": {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "python": random.getstate()},
             "config": OmegaConf.to_container(self.cfg, resolve=True),
             "last_eval": self.last_eval,

@@ -27,9 +27,10 @@ derived from the MJCF and nothing else.
   where the model asks for them by name (its `<pair>` elements; MuJoCo's default contype = conaffinity = 1
   on every geom is no such request). env.legged.contacts=model: as the model has them.
 
-A model that cannot be read this way is one ConfigError line: no free joint, not four legs with a
-foot each, feet not one at each corner, an unknown keyframe, an actuator on no joint, an actuator that
-is neither a position servo nor a torque motor.
+A model that cannot be read this way is one ConfigError line: no free joint, no floor (a colliding geom
+fixed to the world: a robot file without its scene), not four legs with a foot each, feet not one at each
+corner, an unknown keyframe, an actuator on no joint, an actuator that is neither a position servo nor a
+torque motor.
 """
 
 from __future__ import annotations
@@ -275,6 +276,12 @@ def _read_robot(path: str, keyframe: Optional[str]) -> Robot:
             gain = peak[-1] / PD_SATURATION_RAD
             kp.append(gain)
             kd.append(2.0 * math.sqrt(gain * inertia[-1]))
+    if not any(_colliding(model, g) and model.body_weldid[model.geom_bodyid[g]] == 0 for g in range(model.ngeom)):
+        scene = Path(path).with_name("scene.xml")  # Menagerie's layout: the robot file beside the scene that holds it
+        then = (f"give the scene beside it, env.xml_file={scene}" if scene.is_file() and str(scene) != path else
+                'add one to its <worldbody>, e.g. <geom type="plane" size="0 0 0.05"/>')
+        raise ConfigError(f"{where}: {name}'s model has no floor (no colliding geom fixed to the world), so the robot "
+                          f"would fall through the world; {then}")
     subtree = [b for b in range(model.nbody) if model.body_rootid[b] == model.body_rootid[trunk]]
     return Robot(
         name=name, path=path, trunk=model.body(trunk).name, keyframe=key,

@@ -1,0 +1,231 @@
+"""Reliability round 5, second half (issue 60): readers hold a shared lock on the run dir they read (an overwrite
+or a run refuses while one reads it, and a reader refuses while a run trains there); a run records the robot model
+it trained on (a resume or an evaluate on a changed model is refused); a model without a floor is refused;
+newcomer frictions (report.png's returns labelled, heights= with video=true, a first line before heavy imports,
+progress lines as often as the README says)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from conftest import ROOT, compose_config
+from ppo_torchrl import evaluate, export, report, rundir
+from test_bad_input import finished_run, refused, tree_digest  # noqa: F401  (the module's finished run)
+from test_reliability_round3 import RUN, copy_of
+from test_reliability_round5 import ran
+
+GO1 = ROOT / "ppo_torchrl" / "assets" / "menagerie" / "unitree_go1"
+
+
+def start(module, *args):
+    """An entry point in a process of its own (the second process of a test), its output in a pipe."""
+    env = {**os.environ, "PYTHONWARNINGS": "ignore"}
+    env.pop("PPO_TORCHRL_DEBUG", None)
+    return subprocess.Popen([sys.executable, "-m", module, *args], cwd=ROOT, env=env, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True)
+
+
+def wait_for_lock(directory, kind, process, timeout=180):
+    """Until `process` holds the dir's flock of `kind` (READ: shared, WRITE: exclusive), per /proc/locks."""
+    st = os.stat(directory)
+    dev = f"{os.major(st.st_dev):02x}:{os.minor(st.st_dev):02x}:{st.st_ino}"
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        for line in open("/proc/locks").read().splitlines():
+            parts = line.split()
+            if "FLOCK" in parts and "->" not in parts and parts[-3] == dev and parts[-4] == str(process.pid):
+                if parts[-5] == kind:
+                    return
+        if process.poll() is not None:
+            pytest.fail(f"{process.args} ended ({process.returncode}) without holding {directory}: "
+                        f"{process.stderr.read()[-2000:]}")
+        time.sleep(0.1)
+    pytest.fail(f"{process.args} never held {directory}'s lock ({kind}) in {timeout} s")
+
+
+def stop(process):
+    """End a process this test started: SIGINT (a run checkpoints and ends), then SIGKILL after 60 s."""
+    if process.poll() is None:
+        process.send_signal(signal.SIGINT)
+        try:
+            process.wait(60)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+    process.stderr.close()
+
+
+# ---------------------------------------------------------------- 1. readers hold a shared lock
+
+def test_an_overwrite_refuses_while_an_evaluate_reads_the_run(finished_run, tmp_path, capsys):
+    """An evaluate of <dir> runs (a process of its own); `hydra.run.dir=<dir> overwrite=true` starting then would
+    have put the old policy's eval.json in the new run's dir: it is one line naming the reader's pid, and the dir is
+    as it was. Another reader (export) runs beside it."""
+    run = copy_of(finished_run, tmp_path)
+    reader = start("ppo_torchrl.evaluate", f"run={run}", "episodes=1000000")
+    try:
+        wait_for_lock(run, "READ", reader)
+        before = tree_digest(run)
+        try:
+            code, lines = refused([*RUN, f"hydra.run.dir={run}", "overwrite=true"], capsys)
+        finally:
+            rundir.finish()  # had it been claimed: the old run back in its dir, the lock let go
+        assert code == 2 and len(lines) == 1, lines
+        assert f"is in use by pid {reader.pid}" in lines[0] and "reading it" in lines[0], lines
+        assert tree_digest(run) == before and not list(tmp_path.glob("run.replaced-*"))
+        code, lines = ran(export.main, [f"run={run}"], capsys)
+        assert code == 0, lines
+    finally:
+        stop(reader)
+
+
+def test_evaluate_export_and_report_refuse_while_a_run_trains_there(finished_run, tmp_path, capsys):
+    """A resume trains in <dir> (a process of its own): evaluate, export and report of <dir> are one line each,
+    naming the writer's pid, exit 2 (they read checkpoints and wrote beside a run that writes them)."""
+    run = copy_of(finished_run, tmp_path)
+    writer = start("ppo_torchrl", f"resume={run}", "collector.total_frames=100000000")
+    try:
+        wait_for_lock(run, "WRITE", writer)
+        for main, args in ((evaluate.main, [f"run={run}", "episodes=1"]), (export.main, [f"run={run}"]),
+                           (report.main, [str(run)])):
+            code, lines = ran(main, args, capsys)
+            assert code == 2 and len(lines) == 1, (main.__module__, lines)
+            assert f"is in use by pid {writer.pid}, which is writing there" in lines[0], lines
+    finally:
+        stop(writer)
+
+
+# ---------------------------------------------------------------- 2. a run records what its robot model was
+
+@pytest.fixture(scope="module")
+def go1_run(tmp_path_factory):
+    """A tiny legged run on a copy of the shipped Go1 (its scene.xml including go1.xml), via the CLI."""
+    import shutil
+
+    root = tmp_path_factory.mktemp("go1")
+    shutil.copytree(GO1, root / "go1")
+    run = root / "run"
+    done = subprocess.run([sys.executable, "-m", "ppo_torchrl", "env=legged", f"env.xml_file={root / 'go1' / 'scene.xml'}",
+                           *RUN[1:], f"hydra.run.dir={run}"], cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    return run, root / "go1" / "go1.xml"
+
+
+def test_resume_and_evaluate_refuse_a_robot_model_changed_since_the_run(go1_run, capsys):
+    """The copy's trunk gets 1 kg more after the run: resume= and evaluate are one line naming env.xml_file= and
+    overwrite, exit 2, and the run is as it was; with the model put back both go on."""
+    run, model = go1_run
+    original = model.read_text()
+    assert original.count('mass="5.204"') == 1  # the trunk's
+    model.write_text(original.replace('mass="5.204"', 'mass="6.204"'))
+    try:
+        before = tree_digest(run)
+        code, lines = refused([f"resume={run}", "collector.total_frames=1024"], capsys)
+        assert code == 2 and len(lines) == 1, lines
+        assert "env.xml_file=" in lines[0] and "overwrite=true" in lines[0] and "not the one this run trained on" in lines[0]
+        code, lines = ran(evaluate.main, [f"run={run}", "checkpoint=last", "episodes=1"], capsys)
+        assert code == 2 and len(lines) == 1 and "env.xml_file=" in lines[0] and "overwrite" in lines[0], lines
+        assert tree_digest(run) == before
+    finally:
+        model.write_text(original)
+    from ppo_torchrl.resume import check_resume
+
+    assert check_resume(str(run), ["collector.total_frames=1024"]) == run  # the model it trained on: accepted
+
+
+def test_a_checkpoint_that_recorded_no_model_is_not_checked(tiny_cfg):
+    """A run of an earlier version (no `model` in its checkpoints), or of a Gymnasium env: accepted silently."""
+    from ppo_torchrl.model_record import check_model
+
+    cfg = compose_config(["env=legged", f"env.xml_file={GO1 / 'scene.xml'}"])
+    check_model({"frames": 256}, cfg.env, "resume=old")
+    check_model({"model": None}, tiny_cfg().env, "resume=old")
+
+
+# ---------------------------------------------------------------- 3. a model without a floor
+
+@pytest.mark.parametrize("beside", [True, False])
+def test_a_robot_file_without_a_floor_is_refused_naming_its_scene(tmp_path, capsys, beside):
+    """Menagerie's go1.xml alone has no floor: the robot fell through the world for the whole run (exit 0). One line,
+    naming the scene.xml beside it when there is one (else how to add a floor); nothing written."""
+    import shutil
+
+    folder = tmp_path / "go1"
+    folder.mkdir()
+    shutil.copy(GO1 / "go1.xml", folder / "go1.xml")
+    if beside:
+        shutil.copy(GO1 / "scene.xml", folder / "scene.xml")
+    before = sorted(p.name for p in tmp_path.rglob("*"))
+    code, lines = refused(["env=legged", f"env.xml_file={folder / 'go1.xml'}", f"hydra.run.dir={tmp_path / 'run'}"],
+                          capsys)
+    assert code == 2 and len(lines) == 1 and "has no floor" in lines[0], lines
+    assert (f"env.xml_file={folder / 'scene.xml'}" in lines[0]) == beside and ('type="plane"' in lines[0]) != beside
+    assert sorted(p.name for p in tmp_path.rglob("*")) == before
+
+
+# ---------------------------------------------------------------- 4. newcomer frictions
+
+def test_report_tells_curriculum_training_episodes_from_the_eval(finished_run, tmp_path):
+    """A step run on a curriculum: report.png's train curves (episodes on the curriculum's steps, ending early at a
+    fall) and eval points (one fixed step) share an axis; their legend says what each is."""
+    from omegaconf import OmegaConf
+
+    run = copy_of(finished_run, tmp_path)
+    cfg = OmegaConf.load(run / "config.yaml")
+    OmegaConf.update(cfg, "env.terrain", {"curriculum": True, "step_height": None, "step_height_range": [0.0, 0.2],
+                                          "eval_step_height": 0.1}, force_add=True)
+    (run / "config.yaml").write_text(OmegaConf.to_yaml(cfg))
+    import matplotlib.pyplot as plt
+
+    fig = report.run_figure(run)
+    labels = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    plt.close(fig)
+    train = [label for label in labels if label.startswith("train")]
+    assert len(train) == 2 and all("curriculum" in label and "end early" in label for label in train), labels
+    assert any(label.startswith("eval") and "fixed step of 10 cm" in label for label in labels), labels
+    plain = report.run_figure(finished_run)  # a run without a step: the labels as they were
+    assert not any("curriculum" in t.get_text() for t in plain.axes[0].get_legend().get_texts())
+    plt.close(plain)
+
+
+def test_heights_with_video_says_how_to_film_a_height(finished_run, capsys):
+    """evaluate heights=... video=true: one line that says how to film a height (a command per height)."""
+    code, lines = ran(evaluate.main, [f"run={finished_run}", "heights=0,0.1", "video=true"], capsys)
+    assert code == 2 and len(lines) == 1, lines
+    assert "env.terrain.step_height=<m> video=true" in lines[0], lines
+
+
+@pytest.mark.parametrize("module", ["ppo_torchrl.evaluate", "ppo_torchrl.export"])
+def test_help_comes_before_the_heavy_imports(module):
+    """`evaluate --help` took 6-10 s (torch, torchrl imported first): the page now comes before them."""
+    began = time.monotonic()
+    done = subprocess.run([sys.executable, "-X", "importtime", "-m", module, "--help"], cwd=ROOT, capture_output=True,
+                          text=True, timeout=120)
+    took = time.monotonic() - began
+    assert done.returncode == 0 and done.stdout.startswith(f"usage: python -m {module} run=<run dir>"), done.stdout
+    imported = {line.split("|")[-1].strip() for line in done.stderr.splitlines() if line.startswith("import time:")}
+    assert not {"torch", "torchrl", "numpy"} & imported and took < 5, (took, sorted(imported)[:20])
+
+
+def test_progress_lines_come_at_most_print_every_s_apart(monkeypatch, capsys):
+    """Plain progress lines (not a terminal) every <= logger.print_every_s (10 s), as the README says: they came
+    at the first iteration after 10 s: 10.4 s apart with 1.3 s iterations."""
+    from ppo_torchrl import loggers
+
+    clock = [0.0]
+    monkeypatch.setattr(loggers.time, "perf_counter", lambda: clock[0])
+    progress = loggers.Progress(100 * 2048, 0, 10.0, tty=False)
+    printed = []
+    for i in range(1, 101):
+        clock[0] = 1.3 * i
+        progress.update({"frames": 2048 * i, "sps": 1600.0, "train/return_last100": 1.0}, 2048, force=i == 100)
+        if capsys.readouterr().err:
+            printed.append(clock[0])
+    gaps = [b - a for a, b in zip(printed, printed[1:])]
+    assert gaps and max(gaps) <= 10.0 and min(gaps[:-1]) >= 5.0, gaps
