@@ -89,6 +89,10 @@ class LocomotionConfig:
     # feet whose contact matches that schedule (a periodic reward, Siekmann et al. 2021).
     gait_period: Optional[float] = None
     gait_clock_weight: float = 0.0
+    # A swing held too long: - w x the share of feet that have been in the air longer than long_swing_limit (s),
+    # each control step (a trot's swing lasts about half its period; a foot held up is not a trot). 0: off.
+    long_swing_cost_weight: float = 0.0
+    long_swing_limit: float = 0.5
     # Floor each step's reward at 0 (legged_gym's only_positive_rewards): while the costs outweigh the
     # forward and healthy rewards (early, exploring), ending the episode by a fall does not pay.
     only_positive_rewards: bool = False
@@ -172,6 +176,8 @@ class LeggedConfig:
     too_high: float = 2.5  # x l: the trunk above this ends the episode too
     gait_period: Optional[float] = 2.66  # x sqrt(l / g): the trot clock's period; null: no clock
     gait_clock_weight: float = 0.5
+    long_swing_cost_weight: float = 0.0  # - w x the share of feet in the air longer than long_swing_limit
+    long_swing_limit: float = 2.0  # x sqrt(l / g): 0.75 of the trot clock's period (0.42 s for a Go1, 0.49 s ANYmal B)
     torque_cost_weight: float = 0.42  # x sum (torque / (m g l))^2
     joint_speed_cost_weight: float = 0.02  # x sum (joint speed x sqrt(l / g))^2
     foot_slip_cost_weight: float = 0.25  # x sum over feet down of (foot speed / sqrt(g l))^2

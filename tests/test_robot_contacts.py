@@ -202,3 +202,21 @@ def test_a_bad_contacts_or_physics_step_is_one_error_line_and_exit_2(override, e
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error:") and expected in lines[0], done.stderr
     assert not (tmp_path / "run").exists()
+
+
+def test_a_swing_held_past_its_limit_costs_in_proportion_to_the_feet_held():
+    """Recipe v2's gait lever: env.legged.long_swing_cost_weight x the share of feet in the air for longer than
+    long_swing_limit x sqrt(l / g) (0.42 s for Go1); a foot down, or up for less, costs nothing."""
+    import math
+
+    env = go1("env.legged.long_swing_cost_weight=0.8").unwrapped
+    env.reset(seed=0)
+    env.step(np.zeros(env.action_space.shape))
+    assert env._swing_limit == pytest.approx(2.0 * math.sqrt(0.4260 / 9.81), rel=1e-3)
+    env._contacts = lambda: (np.array([False, False, True, True]), 0)  # LF and RF up
+    env._air_time = np.array([env._swing_limit, 0.1, 0.0, 0.0])  # LF up for the limit already, RF briefly
+    _, terms = env._legged_terms(np.zeros(env.action_space.shape))
+    assert terms["reward_long_swing"] == pytest.approx(-0.8 * 1 / 4)
+    plain = go1().unwrapped
+    plain.reset(seed=0)
+    assert "reward_long_swing" not in plain.step(np.zeros(env.action_space.shape))[4]

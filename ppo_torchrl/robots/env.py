@@ -70,7 +70,7 @@ LEGGED_KEYS = ("heading", "target_speed", "torque_limit", "joint_speed_limit", "
                "action_rate_cost_weight", "foot_slip_cost_weight", "base_height_cost_weight", "base_height_target",
                "orientation_cost_weight", "body_contact_cost_weight", "feet_air_time_weight", "feet_air_time_target",
                "foot_geoms", "only_positive_rewards", "terminate_on_contact", "healthy_z_above_terrain",
-               "gait_period", "gait_clock_weight", "contacts", "physics_dt")
+               "gait_period", "gait_clock_weight", "long_swing_cost_weight", "long_swing_limit", "contacts", "physics_dt")
 
 
 def register() -> None:
@@ -180,12 +180,13 @@ class LocomotionEnv(StepTerrain, FootContacts, LeggedRewards, AntEnv):
         self._positive_only = bool(legged.get("only_positive_rewards"))
         self._z_above_terrain = bool(legged.get("healthy_z_above_terrain"))
         self._air_target = float(legged.get("feet_air_time_target", 0.5))
+        self._swing_limit = float(legged.get("long_swing_limit", 0.5))
         target = legged.get("base_height_target")
         self._height_target = self._init_z if target is None else float(target)
         self._set_up_clock(legged.get("gait_period"))
         self._needs_contacts = bool(self.observe_contacts or self._w["foot_slip_cost_weight"]
                                     or self._w["feet_air_time_weight"] or self._w["body_contact_cost_weight"]
-                                    or self._w["gait_clock_weight"])
+                                    or self._w["gait_clock_weight"] or self._w["long_swing_cost_weight"])
         self._dt = self.dt  # the control step (s), read from the model once
         self.measure_gait = False  # evaluate sets it: gait figures sampled every physics step
         self.gait = GaitMeter(len(self.feet), self._speed_limit, self.foot_corners)
@@ -525,6 +526,6 @@ def locomotion_checks(loco) -> list:
                 "(or null: as the model has it)")]
             + [(loco.get("gait_period") is None or loco.get("gait_period") > 0,
                 f"env.locomotion.gait_period={loco.get('gait_period')} must be > 0 s (or null: no trot clock)")]
-            + [non_negative(k) for k in ("kp", "kd", "armature", "feet_air_time_target", *weights)])
+            + [non_negative(k) for k in ("kp", "kd", "armature", "feet_air_time_target", "long_swing_limit", *weights)])
 
 

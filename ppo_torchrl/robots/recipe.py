@@ -29,6 +29,7 @@ DERIVED = {
     "locomotion": {"main_body": None, "heading": None, "frame_skip": "control_dt", "target_speed": "target_speed",
                    "forward_reward_weight": "forward_reward_weight", "healthy_z_range": "fall_height",
                    "gait_period": "gait_period", "gait_clock_weight": "gait_clock_weight",
+                   "long_swing_cost_weight": "long_swing_cost_weight", "long_swing_limit": "long_swing_limit",
                    "torque_cost_weight": "torque_cost_weight", "joint_speed_cost_weight": "joint_speed_cost_weight",
                    "foot_slip_cost_weight": "foot_slip_cost_weight", "base_height_target": None,
                    "base_height_cost_weight": "base_height_cost_weight", "terminate_on_contact": None,
@@ -86,6 +87,8 @@ def derived_values(robot: Robot, legged) -> dict:
             "healthy_z_range": [legged.fall_height * l, legged.too_high * l],
             "gait_period": None if legged.gait_period is None else legged.gait_period * time,
             "gait_clock_weight": legged.gait_clock_weight if legged.gait_period is not None else 0.0,
+            "long_swing_cost_weight": legged.get("long_swing_cost_weight", 0.0),
+            "long_swing_limit": legged.get("long_swing_limit", 2.0) * time,
             "torque_cost_weight": legged.torque_cost_weight / weight_moment ** 2,
             "joint_speed_cost_weight": legged.joint_speed_cost_weight * time ** 2,
             "foot_slip_cost_weight": legged.foot_slip_cost_weight / speed ** 2,
@@ -149,7 +152,8 @@ def legged_checks(legged) -> list:
                 "success_margin", "height_sample_spacing", "curriculum_step")
     checks = [(legged[k] > 0, f"env.legged.{k}={legged[k]} must be > 0") for k in positive]
     checks += [(legged[k] >= 0, f"env.legged.{k}={legged[k]} must be >= 0")
-               for k in ("forward_reward_weight", "gait_clock_weight", "torque_cost_weight", "joint_speed_cost_weight",
+               for k in ("forward_reward_weight", "gait_clock_weight", "long_swing_cost_weight", "long_swing_limit",
+                         "torque_cost_weight", "joint_speed_cost_weight",
                          "foot_slip_cost_weight", "base_height_cost_weight")]
     contacts, dt = legged.get("contacts", CONTACT_MODES[0]), str(legged.get("physics_dt") or "model")
     checks.append((contacts in CONTACT_MODES, f"env.legged.contacts={contacts} is not known; use "

@@ -2,8 +2,8 @@
 of Ant-v5's forward, healthy, control and contact terms: joint torque, joint speed, joint speed past
 the limit (the largest excess of each joint over the control step's physics steps, so the impacts
 that eval's peak joint speed sees are paid for), action rate, foot slip, base height and
-orientation, feet air time, non-foot contacts, and a trot clock (a periodic reward for the diagonal
-pairs' contacts, Siekmann et al. 2021); `target_speed` caps the rewarded forward speed.
+orientation, feet air time, a swing held past a limit, non-foot contacts, and a trot clock (a periodic reward
+for the diagonal pairs' contacts, Siekmann et al. 2021); `target_speed` caps the rewarded forward speed.
 
 `LeggedRewards` is a mixin of `LocomotionEnv` (robots/env.py): it reads the env's weights (`_w`),
 its contacts (robots/contacts.py) and the simulator.
@@ -93,6 +93,9 @@ class LeggedRewards:
                     ((self._air_time - self._air_target) * touchdown).sum())
             if w["body_contact_cost_weight"]:
                 terms["reward_body_contact"] = -w["body_contact_cost_weight"] * body_contacts
+            if w["long_swing_cost_weight"]:  # feet still in the air after this step, past the limit
+                held = (~feet) & (self._air_time + self._dt > self._swing_limit)
+                terms["reward_long_swing"] = -w["long_swing_cost_weight"] * float(np.count_nonzero(held) / len(feet))
             if w["gait_clock_weight"]:  # the phase this step was taken in
                 meant = self.feet_meant_down()
                 terms["reward_gait_clock"] = w["gait_clock_weight"] * float(np.count_nonzero(feet == meant) / len(feet))
