@@ -337,9 +337,10 @@ def heights_in_metres(heights: list[tuple], env_cfg) -> list[float]:
         raise ConfigError("heights in leg lengths (0.25l) need a run of env=legged, whose robot has one; give m here")
     from ppo_torchrl.envs import resolve_model_file
     from ppo_torchrl.robots.model import read_robot
+    from ppo_torchrl.robots.recipe import in_metres
 
     leg = read_robot(resolve_model_file(env_cfg.xml_file), env_cfg.legged.keyframe).leg_length
-    return [round(h * leg, 6) if legs else h for h, legs in heights]
+    return [in_metres(h, leg) if legs else h for h, legs in heights]
 
 
 def sweep_row(height: float, episodes: int, result: dict) -> dict:

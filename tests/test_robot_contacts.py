@@ -220,3 +220,18 @@ def test_a_swing_held_past_its_limit_costs_in_proportion_to_the_feet_held():
     plain = go1().unwrapped
     plain.reset(seed=0)
     assert "reward_long_swing" not in plain.step(np.zeros(env.action_space.shape))[4]
+
+
+def test_the_eval_step_a_video_films_is_the_sweeps_step_to_the_micrometre():
+    """Issue 59 item 7: evaluate's default step (what video=true films) and heights=0.25l's step are one number."""
+    from ppo_torchrl.compose import compose
+    from ppo_torchrl.evaluate import heights_in_metres, parse_heights
+    from ppo_torchrl.robots.model import read_robot
+    from ppo_torchrl.robots.recipe import scaled_env
+
+    for folder in ("unitree_go2", "anybotics_anymal_b"):
+        cfg = compose(["experiment=legged_trot", f"env.xml_file={ROBOTS_DIR / folder / 'scene.xml'}"])
+        robot = read_robot(cfg.env.xml_file)
+        default = scaled_env(cfg.env, robot).terrain.eval_step_height
+        swept = heights_in_metres(parse_heights("0.25l"), cfg.env)[0]
+        assert default == swept and default != 0.25 * robot.leg_length  # the unrounded product differs

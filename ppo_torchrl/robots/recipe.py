@@ -69,6 +69,13 @@ def physics_dt(robot: Robot, legged) -> float:
     return robot.timestep if given == "model" else float(given)
 
 
+def in_metres(legs: float, leg_length: float) -> float:
+    """A step height given in leg lengths, in m to the micrometre: the one conversion, so that the eval's step,
+    a video of it and evaluate's height sweep (heights=0.25l) climb the same step (issue 59 item 7: a video at the
+    unrounded height and a sweep at the rounded one ran different episodes)."""
+    return round(legs * leg_length, 6)
+
+
 def derived_values(robot: Robot, legged) -> dict:
     """{'locomotion': {...}, 'terrain': {...}}: the values env.legged's targets take on this robot (with the env's
     contacts and physics step, robots/env.py, which no other env reads)."""
@@ -97,7 +104,7 @@ def derived_values(robot: Robot, legged) -> dict:
             "terminate_on_contact": [robot.trunk],
         },
         "terrain": {
-            "eval_step_height": legged.step_height * l,
+            "eval_step_height": in_metres(legged.step_height, l),
             "step_height_range": [h * l for h in legged.step_height_range],
             "curriculum_step": legged.curriculum_step * l,
             "curriculum_band": None if band is None else band * l,
