@@ -205,12 +205,12 @@ class NumpyPolicy:
             else:  # GaussianParams
                 self.loc_head = linear(module.loc)
                 cap = np.inf if module.std_cap is None else module.std_cap
-                if module.state_dependent and module.std_cap is None:
+                if module.state_dependent:
                     scale_head, std_min = linear(module.scale), module.std_min
-                    self.scale_head = lambda x: np.logaddexp(0, scale_head(x)) + std_min
-                elif module.state_dependent:
-                    scale_head, std_min = linear(module.scale), module.std_min
-                    self.scale_head = lambda x: np.minimum(np.logaddexp(0, scale_head(x)), cap) + std_min
+                    if module.std_cap is None:  # no cap: no np.minimum in the per-step draw
+                        self.scale_head = lambda x: np.logaddexp(0, scale_head(x)) + std_min
+                    else:
+                        self.scale_head = lambda x: np.minimum(np.logaddexp(0, scale_head(x)), cap) + std_min
                 else:  # the same std for every observation: computed once here
                     scale = np.minimum(module.log_std.detach().exp().cpu().numpy(), cap) + module.std_min
                     self.scale_head = lambda x: scale

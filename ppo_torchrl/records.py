@@ -46,11 +46,12 @@ def compress(path: Union[str, Path]) -> Path:
     """Write `<path>.xz` (xz -9, no timestamps: the same bytes from the same text) beside `path`, which stays."""
     path = Path(path)
     out = path.with_name(path.name + SUFFIX)
-    data = lzma.compress(path.read_bytes(), preset=9 | lzma.PRESET_EXTREME)
+    text = path.read_bytes()
     if out.exists():
-        if out.is_file() and lzma.decompress(out.read_bytes()) == path.read_bytes():
+        if out.is_file() and lzma.decompress(out.read_bytes()) == text:
             return out  # already this record
         raise FileExistsError(f"{out} exists and holds another text; move it away first")
+    data = lzma.compress(text, preset=9 | lzma.PRESET_EXTREME)
     tmp = out.with_name(out.name + ".tmp")
     tmp.write_bytes(data)
     tmp.replace(out)
