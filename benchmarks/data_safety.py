@@ -45,13 +45,15 @@ COMMAND = r'''
 import sys, time, json
 from pathlib import Path
 from ppo_torchrl import rundir
+from ppo_torchrl.lifecycle import Lifecycle
 from ppo_torchrl.errors import ConfigError
 kind, d, pause = sys.argv[1], Path(sys.argv[2]), float(sys.argv[3])
+life = Lifecycle()  # the command's claims, as __main__.cli holds them
 print("ready", flush=True)  # imports done: the harness's signal lands in the command's steps
 def step(): time.sleep(pause)
 def train(d):  # what trainer.train writes in a claimed dir: start-up files, checkpoints, the summary
     rundir.atomic_write_bytes(d / "config.yaml", lambda f: f.write(b"seed: 1\n"))
-    rundir.commit(d)
+    life.commit(d)
     for frames in (256, 512):
         step()
         rundir.atomic_write_bytes(d / "checkpoints" / "last.pt", lambda f: f.write(b"ckpt%d" % frames))
@@ -61,7 +63,7 @@ def train(d):  # what trainer.train writes in a claimed dir: start-up files, che
     rundir.record(d)
 try:
     if kind in ("new", "overwrite"):
-        rundir.claim(d, overwrite=kind == "overwrite")
+        life.claim(d, overwrite=kind == "overwrite")
         step()
         for name in ("config", "hydra", "overrides"):
             rundir.atomic_write_bytes(d / ".hydra" / f"{name}.yaml", lambda f: f.write(b"{}\n"))
@@ -70,31 +72,31 @@ try:
     elif kind == "resume":
         if not (d / "checkpoints" / "last.pt").is_file():
             raise ConfigError(f"resume={d}: not a run dir with a checkpoint")
-        rundir.claim(d, resume=True)
+        life.claim(d, resume=True)
         step()
         rundir.atomic_write_bytes(d / "checkpoints" / "last.pt", lambda f: f.write(b"ckpt768"))
         rundir.record(d)
     elif kind in ("sweep", "sweep_overwrite"):  # __main__.prepare claims the sweep dir, each job its own
-        rundir.claim(d, overwrite=kind == "sweep_overwrite", what="sweep")
+        life.claim(d, overwrite=kind == "sweep_overwrite", what="sweep")
         step()
         for job in ("0", "1"):
             j = d / job
-            rundir.claim(j, what="job")
+            life.claim(j, what="job")
             rundir.atomic_write_bytes(j / ".hydra" / "config.yaml", lambda f: f.write(b"{}\n"))
             step()
             train(j)
-            rundir.rollback(j)
+            life.rollback(j)
         rundir.atomic_write_bytes(d / "multirun.yaml", lambda f: f.write(b"{}\n"))
     elif kind in ("trial", "trial_overwrite"):  # a trial_seeds run: the parent of one run dir per seed
-        rundir.claim(d, overwrite=kind == "trial_overwrite")
+        life.claim(d, overwrite=kind == "trial_overwrite")
         rundir.atomic_write_bytes(d / ".hydra" / "config.yaml", lambda f: f.write(b"{}\n"))
-        rundir.commit(d)
+        life.commit(d)
         for seed in (1, 2):
             s = d / f"seed{seed}"
-            rundir.claim(s)
+            life.claim(s)
             step()
             train(s)
-            rundir.rollback(s)
+            life.rollback(s)
             rundir.atomic_write_json(d / "trial.json", {"seeds": [1, 2][:seed]})
             rundir.record(d)
     elif kind in ("evaluate", "export", "report"):
@@ -106,13 +108,13 @@ try:
         rundir.atomic_write_bytes(out, lambda f: f.write(b"output"), owner=d)  # the entry points' way
         rundir.record(d, [out])
 except ConfigError as exc:
-    rundir.finish()
+    life.finish()
     print(f"error: {exc}", file=sys.stderr)
     sys.exit(2)
 except KeyboardInterrupt:
-    rundir.finish()
+    life.finish()
     sys.exit(130)
-rundir.finish()
+life.finish()
 '''
 
 

@@ -65,35 +65,29 @@ def train(overrides: Iterable[str] = (), *, run_dir: Optional[PathLike] = None, 
     """Train PPO from command-line overrides (e.g. ["env=Hopper-v4", "seed=3"]); returns the run when it ends.
     run_dir: where (default: the CLI's outputs/<env>/<time>); resume: a stopped run's dir to continue (overrides
     then change what the CLI's resume allows, e.g. collector.total_frames)."""
-    from ppo_torchrl import checkpoint, rundir
     from ppo_torchrl.compose import compose, hydra_value
-    from ppo_torchrl.config import resume_config
     from ppo_torchrl.errors import ConfigError
-    from ppo_torchrl.resume import check_resume
+    from ppo_torchrl.lifecycle import Lifecycle
     from ppo_torchrl.trainer import Trainer
-    from ppo_torchrl.validation import validate_config
 
     overrides = [str(o) for o in overrides]
     if any(o.startswith(("resume=", "hydra.run.dir=", "overwrite=")) for o in overrides):
         raise ConfigError("train(): give resume, run_dir and overwrite as arguments, not as overrides")
-    state = None
-    if resume is not None:
-        directory = check_resume(str(resume), overrides)
-        rundir.claim(directory, resume=True)
-        state = checkpoint.load(directory / "checkpoints" / checkpoint.LAST)
-        cfg = resume_config(directory, overrides, state)
-    else:
-        cfg = compose(overrides)
-        validate_config(cfg)
-        directory = Path(run_dir) if run_dir is not None else Path(hydra_value(compose(overrides, with_hydra=True),
-                                                                                "hydra.run.dir"))
-        rundir.claim(directory, overwrite=overwrite)
+    life = Lifecycle()  # the CLI's lifecycle: the same checks, claims and rollback
     try:
-        summary = Trainer(cfg, directory, state).train()
+        if resume is not None:
+            start = life.resume(str(resume), overrides)
+        else:
+            cfg = compose(overrides)
+            life.check(cfg, keep_env=True)
+            directory = Path(run_dir) if run_dir is not None else Path(hydra_value(compose(overrides, with_hydra=True),
+                                                                                    "hydra.run.dir"))
+            start = life.new_run(directory, overwrite)
+            start.cfg = cfg
+        summary = Trainer(start.cfg, start.run_dir, start.state, life.env_spec(start.cfg.env), life).train()
     finally:
-        rundir.rollback(directory)  # refused before training started: the dir as it was (a started run is kept)
-        rundir.release(directory)
-    return Run(directory, summary)
+        life.finish()  # refused before training started: the dir as it was (a started run is kept); locks let go
+    return Run(start.run_dir, summary)
 
 
 def load(run_dir: PathLike, checkpoint: str = "best") -> Policy:

@@ -420,35 +420,3 @@ def run_config(run_dir, state: dict, announce: bool = False):
             print(f"warning: {Path(run_dir) / 'config.yaml'} is missing, damaged or differs from the checkpoint's "
                   "config; using the checkpoint's", file=sys.stderr, flush=True)
     return cfg
-
-
-def resume_config(run_dir, overrides, state: dict, announce: bool = False):
-    """The checkpoint's config of `run_dir` (run_config) with this command's `key=value` overrides applied on
-    top. A group choice (`logger=csv`) is accepted when it is the run's own (`.hydra/hydra.yaml`), refused otherwise."""
-    from pathlib import Path
-
-    from ppo_torchrl.errors import ConfigError
-
-    cfg = run_config(run_dir, state, announce)
-    hydra_file = Path(run_dir) / ".hydra" / "hydra.yaml"
-    try:
-        choices = OmegaConf.load(hydra_file).hydra.runtime.choices if hydra_file.is_file() else {}
-    except Exception:  # noqa: BLE001 - a damaged hydra.yaml: group choices cannot be compared, so none is accepted
-        choices = {}
-    for override in overrides:
-        group, _, option = override.partition("=")
-        if group in choices:
-            saved_choice = "null" if choices[group] is None else choices[group]
-            if option != saved_choice:
-                raise ConfigError(f"resume: {override} differs from the run's {group}={saved_choice}; a resumed "
-                                  "run keeps its group choices (only key=value overrides apply)")
-            continue
-        try:
-            cfg = OmegaConf.merge(cfg, OmegaConf.from_dotlist([override]))
-        except Exception as exc:
-            raise ConfigError(
-                f"resume: cannot apply '{override}' to the saved config ({str(exc).splitlines()[0]}); "
-                "on resume only key=value overrides of existing keys apply, e.g. collector.total_frames=N"
-            ) from exc
-    cfg.resume = str(run_dir)
-    return cfg

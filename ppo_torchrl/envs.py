@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import functools
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Optional, Sequence
+from typing import Any, Optional, Sequence
 
 import gymnasium as gym
 import numpy as np
@@ -45,14 +45,25 @@ TERRAIN_KNOBS = ("step_height", "step_height_range", "curriculum", "step_distanc
 TRACKING_CAMERA = "track"  # videos use a model camera of this name when there is one (it can follow the robot)
 
 
-@dataclass(frozen=True)
+@dataclass
 class EnvSpec:
-    """The shapes and bounds the models and checkpoints depend on."""
+    """The shapes and bounds the models and checkpoints depend on; `env`: the Gymnasium env they were read from,
+    kept open for the training env to step (env_spec(keep_env=True)), handed over once by `take_env`."""
 
     obs_dim: int
     action_dim: int
     action_low: np.ndarray
     action_high: np.ndarray
+    env: Any = field(default=None, compare=False, repr=False)
+
+    def take_env(self):
+        env, self.env = self.env, None
+        return env
+
+    def close(self) -> None:
+        env = self.take_env()
+        if env is not None:
+            env.close()
 
 
 def env_files() -> list[str]:
@@ -359,16 +370,11 @@ def extra_transforms(env_cfg) -> list:
     return built
 
 
-_SPARE: dict = {}  # the env config's key -> the Gymnasium env that env_spec built: a training env's first
 
-
-def _key(env_cfg) -> str:
-    return OmegaConf.to_yaml(env_cfg, resolve=True)
-
-
-def env_spec(env_cfg) -> EnvSpec:
-    """The env's sizes and action bounds. The env built to read them is kept (one, the latest) for the training
-    env of the same config, so that a run builds its env once before step 1."""
+def env_spec(env_cfg, keep_env: bool = False) -> EnvSpec:
+    """The env's sizes and action bounds, read from the env built from `env_cfg`. keep_env: that env stays open in
+    the spec (`EnvSpec.env`) for the training env of the same config to step (make_torchrl_env's first_env), so
+    that a run builds its env once before step 1; else it is closed."""
     env = make_gym_env(env_cfg)
     if env_cfg.transforms.extra:  # the observation the networks see is the transformed one
         torchrl_env = make_torchrl_env(env_cfg, clip_actions=False, gamma=0.99)
@@ -389,10 +395,10 @@ def env_spec(env_cfg) -> EnvSpec:
         action_low=env.action_space.low.astype(np.float32),
         action_high=env.action_space.high.astype(np.float32),
     )
-    for spare in _SPARE.values():
-        spare.close()
-    _SPARE.clear()
-    _SPARE[_key(env_cfg)] = env
+    if keep_env:
+        spec.env = env
+    else:
+        env.close()
     return spec
 
 
@@ -407,6 +413,7 @@ def make_torchrl_env(
     device: str = "cpu",
     num_envs: int = 1,
     seed: Optional[int] = None,
+    first_env=None,
     **render_kwargs,
 ) -> TransformedEnv:
     """`TransformedEnv(GymWrapper(gymnasium env))` with the configured transforms: the card's pipeline,
@@ -419,11 +426,11 @@ def make_torchrl_env(
     train=False: observation statistics frozen from `obs_stats`, rewards left raw: the evaluation env,
     whose returns are the ones a user compares.
     seed: each env i is reset with seed + i once built, so that everything that follows is reproducible.
+    first_env: a Gymnasium env of `env_cfg` already built (env_spec's, kept by the command's check): env 0.
     """
     t = env_cfg.transforms
-    spare = _SPARE.pop(_key(env_cfg), None) if train and render_mode is None else None  # env_spec's, unused
-    gym_envs = [resumable(spare if i == 0 and spare is not None else make_gym_env(env_cfg, render_mode, not train,
-                                                                                  **render_kwargs))
+    gym_envs = [resumable(first_env if i == 0 and first_env is not None else make_gym_env(env_cfg, render_mode,
+                                                                                          not train, **render_kwargs))
                 for i in range(num_envs)]
     if seed is not None:
         for i, env in enumerate(gym_envs):

@@ -18,7 +18,8 @@
   written) stops a second process from writing into a dir in use; the refusal names the holder. It is
   exclusive; evaluate, export and report hold it shared while they read the dir (locks.py).
 
-`claim()` runs before Hydra or the app writes anything, so a refused command changes nothing.
+These are the rules; lifecycle.py applies them (a command's claims, locks and rollbacks: `Lifecycle.claim()`
+runs before Hydra or the app writes anything, so a refused command changes nothing).
 """
 
 from __future__ import annotations
@@ -28,14 +29,12 @@ import fcntl
 import json
 import os
 import re
-import sys
 import tempfile
 import time
 from pathlib import Path
 from typing import Dict, List, Optional
 
-from ppo_torchrl.errors import ConfigError, EnvironmentFault
-from ppo_torchrl.locks import holder as _holder
+from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.ownership import MANIFEST, digest, holder, inside_run, relative, walk
 
 STASH = ".replaced"  # earlier versions moved an overwritten run's files here; one left by a kill is moved aside whole
@@ -61,11 +60,9 @@ UNLISTED_OK = re.compile(r"^(?:(?:seed\d+/)?checkpoints/(?:last|best|frames_\d+)
 
 ZOO = Path(__file__).resolve().parent.parent / "zoo"  # the shipped policies: read-only to every command
 _BEGAN_NS = time.time_ns()  # this process's start: `record` lists only the files written since
-_held: Dict[Path, int] = {}  # dir -> open descriptor holding its lock, for the life of the process
-_pending: Dict[Path, dict] = {}  # claimed dirs not yet committed: what rollback() undoes
 
 
-def _files(directory: Path) -> List[str]:
+def files_in(directory: Path) -> List[str]:
     """Every file under `directory` (relative, '/'-separated), the manifest and the stash left out.
     A symlink anywhere is refused: the app never writes one, and following it could delete elsewhere."""
     found = []
@@ -178,7 +175,7 @@ def record(directory: Path, files: Optional[List[Path]] = None) -> None:
     listed_now = set(listed(directory) or [])
     until = time.time_ns()
     try:
-        listed_now.update(f for f in _files(directory) if TRAINED.match(f)
+        listed_now.update(f for f in files_in(directory) if TRAINED.match(f)
                           and _BEGAN_NS <= (directory / f).stat().st_mtime_ns <= until)
     except ConfigError:  # a symlink put there by hand: listed files stay as they were
         pass
@@ -261,7 +258,7 @@ def foreign_files(directory: Path) -> List[str]:
     """The files of `directory` that the app did not write ([] for an app's dir; all of them without a manifest).
     A run dir inside it (a trial's seed<k>/) answers for its own files by its own manifest: a seed stopped
     midway is the app's even before the trial's manifest lists it."""
-    files = _files(directory)
+    files = files_in(directory)
     ours = listed(directory)
     if ours is None:
         return [f for f in files if f != LEGACY_LOCK]
@@ -283,8 +280,13 @@ def foreign_files(directory: Path) -> List[str]:
     return [f for f in files if not own(f)]
 
 
-def _job_dirs(directory: Path) -> List[Path]:
+def job_dirs(directory: Path) -> List[Path]:
     return [p for p in sorted(directory.iterdir()) if p.is_dir() and not p.is_symlink() and p.name != STASH]
+
+
+def holds_files(directory: Path) -> bool:
+    """Anything in the dir: a file (the manifest and an old stash aside) or a job's folder."""
+    return bool(files_in(directory) or job_dirs(directory))
 
 
 def is_run(directory: Path) -> bool:
@@ -299,16 +301,16 @@ def check_new_dir(directory: Path, overwrite: bool, what: str = "run") -> None:
         raise ConfigError(f"the {what} dir {directory} is a file; give {key} a directory")
     if not directory.is_dir():
         return
-    if not [f for f in _files(directory) if f != LEGACY_LOCK] and not _job_dirs(directory):
+    if not [f for f in files_in(directory) if f != LEGACY_LOCK] and not job_dirs(directory):
         return  # empty (empty folders, a stale lock file of an earlier version): a new run may use it
     if what == "run" or is_run(directory):  # a dir with a manifest (a run's, a trial's, a sweep's) answers by it
         foreign, has_run = foreign_files(directory), is_run(directory)
     else:  # a sweep dir of an earlier version: its own files, and job dirs that are each a run dir (or empty)
         foreign = [f for f in foreign_files(directory) if "/" not in f]
-        for job in _job_dirs(directory):
-            if _files(job):
+        for job in job_dirs(directory):
+            if files_in(job):
                 foreign += [f"{job.name}/{f}" for f in foreign_files(job)]
-        has_run = is_run(directory) or any(is_run(job) for job in _job_dirs(directory))
+        has_run = is_run(directory) or any(is_run(job) for job in job_dirs(directory))
     legacy = {"metrics.csv", "summary.json", "checkpoints/last.pt"} & set(foreign)  # what every run wrote
     if what == "run" and not has_run and legacy and all(OWNED.match(f) for f in foreign):
         raise ConfigError(f"{directory} holds a run of an earlier version, which listed no files: overwrite=true cannot "
@@ -324,29 +326,6 @@ def check_new_dir(directory: Path, overwrite: bool, what: str = "run") -> None:
                           "or replace it with overwrite=true")
 
 
-def lock(directory: Path) -> None:
-    """Take the dir's lock for this process, or fail naming the process that holds it."""
-    directory = Path(directory).resolve()
-    if directory in _held:
-        return
-    try:
-        directory.mkdir(parents=True, exist_ok=True)
-        fd = os.open(directory, os.O_RDONLY | os.O_DIRECTORY)
-    except OSError as exc:
-        raise ConfigError(f"cannot write the run dir {directory}: {exc.strerror or exc}; "
-                          "pick a dir you can write with hydra.run.dir=<dir>") from None
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        os.close(fd)
-        raise ConfigError(f"{directory} is in use by {_holder(directory)}; wait for it to end or pick another dir") from None
-    except OSError as exc:  # e.g. ENOLCK on a network filesystem without locks
-        os.close(fd)
-        raise EnvironmentFault(f"cannot lock the run dir {directory}: {exc.strerror or exc} (this filesystem has no "
-                               "file locks); put runs on a local disk with hydra.run.dir=<dir>") from None
-    _held[directory] = fd
-
-
 def shipped(directory: Path) -> bool:
     """A folder of the shipped zoo (or inside one): commands read it and write their files elsewhere."""
     path = Path(directory).expanduser().resolve()
@@ -360,11 +339,9 @@ def output_dir_for(directory: Path, default: Path) -> Path:
 
 
 def in_use(directory: Path) -> bool:
-    """Another process writes there (a run still training: its lock is exclusive; a reader's shared lock, an
-    evaluate's, is not asked); leaves the lock as it was."""
+    """Another process (or another claim of this one) writes there: a run still training holds its lock exclusive
+    (lifecycle.py); a reader's shared lock, an evaluate's, is not asked. Leaves the lock as it was."""
     directory = Path(directory).resolve()
-    if directory in _held:
-        return False
     try:
         fd = os.open(directory, os.O_RDONLY | os.O_DIRECTORY)
     except OSError:
@@ -381,58 +358,7 @@ def in_use(directory: Path) -> bool:
         os.close(fd)
 
 
-def claim(directory: Path, *, overwrite: bool = False, resume: bool = False, what: str = "run") -> Path:
-    """Check the dir (see the module doc) and lock it; with overwrite, move the old run aside (one rename).
-    what="job": a sweep's job dir, checked with its sweep dir; what Hydra wrote there is the job's own."""
-    directory = Path(directory).expanduser()
-    if directory.resolve() in _held:  # claimed already by this process (before Hydra started)
-        return directory
-    created = _missing_parents(directory)
-    if directory.is_dir():  # in use by another process: say that first, whatever the dir holds
-        lock(directory)
-    try:
-        if not resume and what != "job":
-            check_new_dir(directory, overwrite, what)
-    except ConfigError:
-        release(directory)
-        raise
-    aside = None
-    if overwrite and not resume and what != "job" and directory.is_dir() and (_files(directory) or _job_dirs(directory)):
-        aside = _move_aside(directory)
-    lock(directory)
-    if resume:
-        return directory
-    manifest = not (directory / MANIFEST).exists()
-    if manifest:  # the dir is the app's from its first file: a kill during start-up leaves a run dir
-        atomic_write_json(directory / MANIFEST, {"app": "ppo_torchrl", "files": []})
-    before = set() if what == "job" else set(_files(directory))
-    _pending[directory.resolve()] = {"what": what, "created": created, "aside": aside, "before": before,
-                                     "manifest": manifest}
-    return directory
-
-
-def _move_aside(directory: Path) -> Path:
-    """Rename `directory` to a new sibling <name>.replaced-<time>, once every run dir inside it is locked
-    by this process (one in use by another refuses, naming it); the locks go with the moved dirs."""
-    inner = [Path(root) for root, _, files in os.walk(directory) if MANIFEST in files and Path(root) != directory]
-    try:
-        for run in inner:
-            lock(run)
-        stamp = time.strftime("%Y%m%d-%H%M%S")
-        aside = directory.with_name(f"{directory.name}{ASIDE}{stamp}")
-        n = 1
-        while aside.exists():
-            n += 1
-            aside = directory.with_name(f"{directory.name}{ASIDE}{stamp}-{n}")
-        os.rename(directory, aside)
-    finally:
-        for run in inner:
-            release(run)
-        release(directory)
-    return aside
-
-
-def _missing_parents(directory: Path) -> List[Path]:
+def missing_parents(directory: Path) -> List[Path]:
     missing, path = [], directory.resolve()
     while not path.exists():
         missing.append(path)
@@ -440,7 +366,7 @@ def _missing_parents(directory: Path) -> List[Path]:
     return missing
 
 
-def _prune_empty(directory: Path) -> None:
+def prune_empty(directory: Path) -> None:
     """Remove the empty folders under `directory` (bottom up), never `directory` itself."""
     for root, dirs, _ in os.walk(directory, topdown=False):
         for name in dirs:
@@ -452,72 +378,12 @@ def _prune_empty(directory: Path) -> None:
                     pass
 
 
-def source(path: Path) -> Path:
-    """Where `path` is now: a path into a dir whose old run overwrite=true moved aside (init_from=<that run>)
-    reads the moved files."""
-    path = Path(path).expanduser().resolve()
-    for key, state in _pending.items():
-        if state["aside"] and (path == key or key in path.parents):
-            return state["aside"].resolve() / path.relative_to(key)
-    return path
-
-
-def commit(directory: Path) -> None:
-    """The new run has started: it keeps its dir (the run it replaced stays where overwrite moved it, named
-    here); list its own files."""
-    directory = Path(directory)
-    state = _pending.pop(directory.resolve(), None)
-    if state is not None and state["aside"]:
-        print(f"overwrite=true: the {state['what']} that was in {directory} is now {state['aside']} (delete it when "
-              "you no longer need it)", file=sys.stderr, flush=True)
-    record(directory)
-
-
-def rollback(directory: Optional[Path] = None) -> None:
-    """A claimed dir whose command failed before `commit`: remove what it wrote, put back what it moved aside."""
-    for key in ([Path(directory).resolve()] if directory is not None else list(_pending)):
-        state = _pending.pop(key, None)
-        if state is None:
-            continue
-        release(key)
-        try:
-            for name in _files(key):
-                if name not in state["before"]:
-                    (key / name).unlink()
-            if state["manifest"]:
-                (key / MANIFEST).unlink()
-            _prune_empty(key)
-            if state["aside"]:
-                key.rmdir()  # only this command's (now empty) dir: the old run goes back in one rename
-                os.rename(state["aside"], key)
-            for path in state["created"]:
-                path.rmdir()
-        except (OSError, ConfigError):
-            pass  # best effort: what is left is named by the next claim's check (the old run stays whole)
-
-
-def finish() -> None:
-    """At the end of a command: a sweep dir whose jobs started is committed; anything else still pending
-    (a run or sweep refused before it started) is rolled back."""
-    for key, state in list(_pending.items()):
-        if state["what"] == "sweep" and any(is_run(job) for job in _job_dirs(key)):
-            commit(key)
-        else:
-            rollback(key)
-
-
-def release(directory: Path) -> None:
-    fd = _held.pop(Path(directory).resolve(), None)
-    if fd is not None:
-        os.close(fd)
-
-
 def unwritable(path: Path) -> Optional[str]:
     """Why files cannot be written in the folder `path`, or None when they can; leaves the disk as it was."""
     path = Path(path)
     if path.exists() and not path.is_dir():
         return "it is a file"
-    created = _missing_parents(path)
+    created = missing_parents(path)
     try:
         path.mkdir(parents=True, exist_ok=True)
         probe = path / f".ppo_torchrl_probe_{os.getpid()}"

@@ -39,7 +39,7 @@ class OnDisk:
             then = (f"every frame is trained; python -m ppo_torchrl resume={run} runs the final eval and marks the "
                     "run finished" if done else f"resume with: python -m ppo_torchrl resume={run}")
             return f"the last checkpoint on disk is {self.checkpoint} at frame {self.checkpoint_frames} ({then})"
-        # a run stopped before it started leaves no dir (rundir.rollback): nothing to overwrite then
+        # a run stopped before it started leaves no dir (Lifecycle.rollback): nothing to overwrite then
         again = f"; to start again in {self.run_dir} add overwrite=true" if self.run_dir and self.started else ""
         if self.frames:
             return f"nothing was saved: the run had done {self.frames} frames and no checkpoint yet{again}"

@@ -16,7 +16,6 @@ from ppo_torchrl.errors import ConfigError
 # A sweep job's dir is <num>_<the overrides that vary> (conf/config.yaml: hydra.sweep.subdir); prepare() tells
 # Hydra which keys do not vary through this list.
 EXCLUDE_KEYS = "hydra.job.config.override_dirname.exclude_keys"
-SWEEP = {}  # the sweep dir this command claimed (prepare), for the line that ends the sweep; its Optuna study
 
 
 def objective(summary: dict) -> float:
@@ -37,7 +36,7 @@ def stored_study(sweeper):
 def fail_running_trials(storage: str, study_name: str) -> None:
     """A signal in a trial of a stored Optuna study: the study's running trial (the sweeper runs one at a time)
     is marked failed now, so the stored study never shows it running. Called by the job that the signal stopped
-    and again by the command as it exits (`__main__.cli`, with the study `announce_study` recorded in SWEEP),
+    and again by the command as it exits (`__main__.cli`, with the study `announce_study` returned, in its Lifecycle),
     where nothing the job was doing can stop it."""
     import optuna
 
@@ -54,7 +53,7 @@ def mark_running_failed(study) -> int:
     return len(running)
 
 
-def run_seeds(cfg, run_dir: Path) -> float:
+def run_seeds(cfg, run_dir: Path, life) -> float:
     """trial_seeds=[6,7,8]: train each seed in turn into run_dir/seed<k>/ (an ordinary run dir each) and
     return the mean of their objectives; trial.json holds the per-seed figures as they come. A seed below
     trial_prune_below ends the trial there (trial.json: "pruned": true)."""
@@ -64,17 +63,17 @@ def run_seeds(cfg, run_dir: Path) -> float:
     from ppo_torchrl import rundir
     from ppo_torchrl.trainer import train
 
-    rundir.commit(run_dir)  # the trial's dir is the seed runs' parent: a seed stopped midway keeps its files
+    life.commit(run_dir)  # the trial's dir is the seed runs' parent: a seed stopped midway keeps its files
     seeds, values = list(cfg.trial_seeds), []
     for seed in seeds:
         seed_cfg = copy.deepcopy(cfg)
         seed_cfg.seed, seed_cfg.trial_seeds, seed_cfg.trial_prune_below = seed, [], None
         seed_dir = run_dir / f"seed{seed}"
-        rundir.claim(seed_dir)
+        life.claim(seed_dir)
         try:
-            values.append(objective(train(seed_cfg, seed_dir, None, next_steps=False)))
+            values.append(objective(train(seed_cfg, seed_dir, None, next_steps=False, life=life)))
         finally:
-            rundir.rollback(seed_dir)
+            life.rollback(seed_dir)
         mean = statistics.fmean(values)
         pruned = cfg.trial_prune_below is not None and values[-1] < cfg.trial_prune_below and seed != seeds[-1]
         rundir.atomic_write_json(run_dir / "trial.json", {
@@ -120,9 +119,10 @@ def hydra_overrides(overrides: list[str]) -> list[str]:
     return [o for o in overrides if o.lstrip("+~").startswith(("hydra.", "hydra/"))]
 
 
-def announce_study(hydra_cfg, overrides: list[str]) -> None:
+def announce_study(hydra_cfg, overrides: list[str]) -> dict:
     """`-m hparams_search=...`: say, before it starts, whether the Optuna study is new or resumed. The space
-    it searches is the sweeper's params with the command's own overrides over them, as the sweeper reads it."""
+    it searches is the sweeper's params with the command's own overrides over them, as the sweeper reads it.
+    Returns the study, {storage, study_name}, for fail_running_trials."""
     import optuna
 
     sweeper = hydra_cfg.hydra.sweeper
@@ -139,7 +139,7 @@ def announce_study(hydra_cfg, overrides: list[str]) -> None:
         space += [o for o in overrides if o not in hydra]
         state += check_stored_study(optuna.load_study(study_name=name, storage=storage), space)
     print(f"optuna: {state} in {storage}", file=sys.stderr, flush=True)
-    SWEEP["study"] = {"storage": storage, "study_name": name}  # for fail_running_trials
+    return {"storage": storage, "study_name": name}
 
 
 def check_stored_study(study, space: list[str]) -> str:

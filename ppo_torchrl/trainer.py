@@ -26,10 +26,11 @@ from ppo_torchrl import checkpoint, rundir, startup
 from ppo_torchrl.advantage import explained_variance, make_advantage
 from ppo_torchrl.checkpoint import CheckpointManager, check_spec
 from ppo_torchrl.collectors import make_collector
-from ppo_torchrl.envs import env_label, seed_everything
+from ppo_torchrl.envs import EnvSpec, env_label, seed_everything
 from ppo_torchrl.errors import ConfigError, Interrupted, TrainingError
 from ppo_torchrl.eval_worker import BackgroundEval, use_background_eval
 from ppo_torchrl.evaluate import GAIT_KEYS, evaluate_policy
+from ppo_torchrl.lifecycle import Lifecycle
 from ppo_torchrl.loggers import (COLUMNS, MetricsFile, Progress, amend_last_row, close_logger, make_logger,
                                  truncate_logs)
 from ppo_torchrl.losses import LOSS_INPUT_KEYS, LOSS_METRICS, NOT_COMPILABLE, make_loss, make_optimizer
@@ -37,7 +38,7 @@ from ppo_torchrl.minibatch import make_minibatch_step
 from ppo_torchrl.model_record import model_record
 from ppo_torchrl.models import make_actor_critic
 from ppo_torchrl.signals import ON_DISK, Interrupt, StopRequest
-from ppo_torchrl.validation import check_frames_left, resolve_device, validate_config
+from ppo_torchrl.validation import resolve_device, validate_config
 
 
 def batch_entropy(dist) -> float:
@@ -76,10 +77,13 @@ def continued_schedule(state: dict, cfg, num_iterations: int) -> tuple:
 
 
 class Trainer:
-    def __init__(self, cfg, run_dir: Path, resume: Optional[dict] = None):
-        self.spec = validate_config(cfg)
-        if resume is not None:
-            check_frames_left(run_dir, resume["frames"], cfg.collector.total_frames, resume)
+    def __init__(self, cfg, run_dir: Path, resume: Optional[dict] = None, spec: Optional[EnvSpec] = None,
+                 life: Optional[Lifecycle] = None):
+        """resume: the checkpoint a resume continues (Lifecycle.resume read and checked it); spec: the env spec the
+        command's check built, with its env; life: the command's Lifecycle (the dir it claimed is committed once
+        the run is set up). Without them (a test, a library user) the config is checked here."""
+        self.spec = spec if spec is not None else validate_config(cfg, keep_env=True)
+        self.life = life if life is not None else Lifecycle()
         self.cfg = cfg
         self.run_dir = Path(run_dir)
         self.run_dir.mkdir(parents=True, exist_ok=True)
@@ -97,7 +101,7 @@ class Trainer:
         # loss -> backward -> clip -> optimizer step: one compiled function with compile on (minibatch.py)
         self.minibatch_step = make_minibatch_step(cfg, self.loss_module, self.optimizer, self.params,
                                                   compile=use_compile(cfg))
-        self.collector = make_collector(cfg, self.ac, cfg.seed, self.device)
+        self.collector = make_collector(cfg, self.ac, cfg.seed, self.device, self.spec.take_env())
         try:
             self._set_up(cfg, resume)
         except BaseException:  # worker processes (collector.workers > 1) must not outlive a failed start
@@ -161,7 +165,7 @@ class Trainer:
     def _init_from(self, source: str, with_optimizer: bool) -> None:
         """Transfer: weights and normalization stats (and optimizer state) of another run; counters,
         envs and RNG streams start fresh. A run dir gives its best checkpoint."""
-        path = rundir.source(Path(source))  # init_from=<the dir this run overwrites>: its old files
+        path = self.life.source(Path(source))  # init_from=<the dir this run overwrites>: its old files
         if path.is_dir():
             path = checkpoint.resolve_checkpoint(path, "best")
         if not path.is_file():
@@ -184,7 +188,7 @@ class Trainer:
         self.metrics = MetricsFile(self.run_dir / "metrics.csv", COLUMNS, append=self.resumed)
         if not self.resumed:  # a resume's overrides reach config.yaml once an iteration has completed
             self.write_config()
-        rundir.commit(self.run_dir)  # set up without error: the run starts, what overwrite=true replaced goes
+        self.life.commit(self.run_dir)  # set up without error: the run starts, what overwrite=true replaced goes
         ON_DISK.started = True
         finishing = self.resumed and self.iteration >= self.num_iterations  # every batch trained, not finished
         print(startup.describe_resume(self.run_dir, self.frames, cfg) + (
@@ -485,13 +489,14 @@ class Trainer:
             rundir.record(self.run_dir)
 
 
-def train(cfg, run_dir: Path, resume: Optional[dict] = None, next_steps: bool = True) -> dict:
+def train(cfg, run_dir: Path, resume: Optional[dict] = None, next_steps: bool = True, spec: Optional[EnvSpec] = None,
+          life: Optional[Lifecycle] = None) -> dict:
     """Train a run to its end; its last lines say what it reached, where its files are and (next_steps) the
     commands to paste next."""
     from ppo_torchrl.loggers import quiet_mujoco
 
     quiet_mujoco()
-    trainer = Trainer(cfg, run_dir, resume)
+    trainer = Trainer(cfg, run_dir, resume, spec, life)
     summary = trainer.train()
     print(startup.describe_end(summary, next_steps), file=sys.stderr, flush=True)
     return summary

@@ -1,8 +1,8 @@
-"""Every value checked before anything runs or is written: the entry point calls `validate_config`
-on the composed config before Hydra starts the job, and the trainer calls it again (tests and
-library users build a Trainer directly). The schema (config.py) already checks keys and types;
-this checks ranges, choices against each component's registry, and the env itself (it is built
-once, so a missing dependency or a bad model file fails here and not after hours of training).
+"""Every value checked before anything runs or is written: the entry point's Lifecycle calls `validate_config`
+on the composed config before Hydra starts the job, and hands the env it built to the trainer (a Trainer
+built without one, by a test or a library user, checks its config itself). The schema (config.py) already
+checks keys and types; this checks ranges, choices against each component's registry, and the env itself
+(a missing dependency or a bad model file fails here and not after hours of training).
 """
 
 from __future__ import annotations
@@ -25,10 +25,13 @@ def one_of(name: str, value, choices) -> tuple:
     return value in choices, f"{name}='{value}' is not known; use one of {', '.join(choices)}"
 
 
-def validate_config(cfg):
-    """Raise ConfigError naming the first bad value; return the env's spec (shapes and bounds)."""
+def validate_config(cfg, keep_env: bool = False, build_env: bool = True):
+    """Raise ConfigError naming the first bad value; return the env's spec (shapes and bounds), built from the
+    env itself; keep_env: with the env it built still open (`EnvSpec.env`, a training env's first). build_env=False:
+    the values only, for a sweep's job whose env config an earlier job's check built (returns None)."""
     from ppo_torchrl.advantage import ESTIMATORS
     from ppo_torchrl.collectors import CHOICES, resolve_backend
+    from ppo_torchrl.envs import env_spec
     from ppo_torchrl.eval_worker import BACKGROUND_CHOICES
     from ppo_torchrl.loggers import LOGGERS
     from ppo_torchrl.losses import LOSSES, OPTIMIZERS, NOT_COMPILABLE
@@ -129,21 +132,8 @@ def validate_config(cfg):
     if c.distributed == "ray" and importlib.util.find_spec("ray") is None:
         raise ConfigError(f"collector.distributed=ray needs Ray, which is not installed: {RAY_INSTALL}")
     validate_policy_config(cfg.policy)
-    return cached_env_spec(cfg.env)
+    return env_spec(cfg.env, keep_env=keep_env) if build_env else None
 
-
-_specs: dict = {}
-
-
-def cached_env_spec(env_cfg):
-    """The env's spec, built once per env config in a process (a sweep's jobs share it; the trainer's
-    second validation of the same config builds nothing)."""
-    from ppo_torchrl.envs import env_spec
-
-    key = OmegaConf.to_yaml(env_cfg, resolve=True)
-    if key not in _specs:
-        _specs[key] = env_spec(env_cfg)
-    return _specs[key]
 
 
 def check_finite(cfg) -> None:
@@ -167,26 +157,6 @@ def check_finite(cfg) -> None:
     data.pop("hydra", None)
     walk(data, "")
 
-
-def check_frames_left(run_dir, frames_done: int, total_frames: int, state: dict = None) -> None:
-    """A resume must leave frames to train (a smaller total would be a silent no-op), or a run to finish: one that
-    has trained its own budget (the checkpoint's) and was stopped before its end (`unfinished`)."""
-    own = (((state or {}).get("config") or {}).get("collector") or {}).get("total_frames")
-    if frames_done >= total_frames and not (own is not None and frames_done >= own and unfinished(run_dir)):
-        raise ConfigError(f"resume={run_dir}: the run has done {frames_done} frames already, collector.total_frames="
-                          f"{total_frames} leaves nothing to do; give a larger collector.total_frames")
-
-
-def unfinished(run_dir) -> bool:
-    """The run's summary.json does not say `finished` (none, unreadable, interrupted, failed): a run stopped
-    after its last batch (its final eval skipped or cut, a kill before its last summary) that resume= finishes."""
-    import json
-    from pathlib import Path
-
-    try:
-        return json.loads((Path(run_dir) / "summary.json").read_text()).get("status") != "finished"
-    except (OSError, ValueError, AttributeError):
-        return True
 
 
 def resolve_device(name: str):

@@ -14,7 +14,7 @@ import pytest
 from ppo_torchrl import checkpoint
 from ppo_torchrl.__main__ import prepare
 from ppo_torchrl.checkpoint import CheckpointManager
-from ppo_torchrl.config import resume_config
+from ppo_torchrl.lifecycle import resume_config
 from ppo_torchrl.errors import Interrupted, TrainingError, guarded
 from ppo_torchrl.trainer import Trainer
 

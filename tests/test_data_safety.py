@@ -24,10 +24,12 @@ def test_an_output_is_listed_between_its_whole_temp_file_and_the_rename(tmp_path
     command may replace it), never one that reads as the user's."""
     from ppo_torchrl import rundir
     from ppo_torchrl.errors import ConfigError
+    from ppo_torchrl.lifecycle import Lifecycle
 
     run = tmp_path / "run"
-    rundir.claim(run)
-    rundir.commit(run)
+    life = Lifecycle()
+    life.claim(run)
+    life.commit(run)
     manifest = (run / rundir.MANIFEST).read_bytes()
 
     def fails(f):
@@ -48,4 +50,4 @@ def test_an_output_is_listed_between_its_whole_temp_file_and_the_rename(tmp_path
     (run / "report.png").write_bytes(b"the user's")  # not listed: the user's, refused
     with pytest.raises(ConfigError):
         rundir.check_replaceable(run, [run / "report.png"])
-    rundir.release(run)
+    life.finish()

@@ -12,7 +12,7 @@ import pytest
 import torch
 
 from ppo_torchrl import checkpoint
-from ppo_torchrl.config import resume_config
+from ppo_torchrl.lifecycle import resume_config
 from ppo_torchrl.errors import ConfigError, Interrupted, TrainingError
 from ppo_torchrl.trainer import Trainer
 

@@ -13,7 +13,7 @@ import time
 
 import pytest
 
-from ppo_torchrl import checkpoint, rundir
+from ppo_torchrl import checkpoint, lifecycle, rundir
 from ppo_torchrl.errors import Interrupted, exit_code, guarded, message_of
 from ppo_torchrl.trainer import Trainer
 
@@ -206,9 +206,9 @@ def test_a_full_disk_or_a_filesystem_without_locks_is_one_line_exit_1(tmp_path, 
     def no_locks(fd, op):
         raise OSError(errno.ENOLCK, "No locks available")
 
-    monkeypatch.setattr(rundir.fcntl, "flock", no_locks)
+    monkeypatch.setattr(lifecycle.fcntl, "flock", no_locks)
     with pytest.raises(SystemExit) as exit_:
-        guarded(rundir.lock, tmp_path / "run")
+        guarded(lifecycle.Lifecycle().lock, tmp_path / "run")
     line = capsys.readouterr().err.strip()
     assert exit_.value.code == 1 and line.startswith("error: cannot lock the run dir") and "local disk" in line
 

@@ -16,6 +16,7 @@ import pytest
 
 from conftest import ROOT, run_cli
 from ppo_torchrl import rundir
+from ppo_torchrl.lifecycle import Lifecycle
 from test_bad_input import finished_run, refused, tree_digest  # noqa: F401  (the module's finished run)
 from test_reliability_round3 import RUN, copy_of
 
@@ -289,15 +290,15 @@ def test_a_sweep_into_a_run_dir_is_told_it_holds_a_run_not_foreign_files(tmp_pat
     from ppo_torchrl.errors import ConfigError
 
     run = tmp_path / "trial"
-    rundir.claim(run)
+    life = Lifecycle()
+    life.claim(run)
     rundir.atomic_write_bytes(run / ".hydra" / "config.yaml", lambda f: f.write(b"{}\n"))
-    rundir.commit(run)
+    life.commit(run)
     seed = run / "seed1"
-    rundir.claim(seed)
+    life.claim(seed)
     rundir.atomic_write_bytes(seed / "summary.json", lambda f: f.write(b"{}\n"))
-    rundir.commit(seed)
-    rundir.release(seed)
-    rundir.release(run)
+    life.commit(seed)
+    life.finish()
     with pytest.raises(ConfigError, match="already holds a sweep.*overwrite=true"):
         rundir.check_new_dir(run, overwrite=False, what="sweep")
     rundir.check_new_dir(run, overwrite=True, what="sweep")  # replaceable
@@ -310,9 +311,10 @@ def test_a_sweep_killed_before_it_listed_hydras_multirun_yaml_can_be_overwritten
     from ppo_torchrl.errors import ConfigError
 
     sweep = tmp_path / "sweep"
-    rundir.claim(sweep, what="sweep")  # its manifest, listing nothing yet
+    life = Lifecycle()
+    life.claim(sweep, what="sweep")  # its manifest, listing nothing yet
     (sweep / "multirun.yaml").write_text("hydra: {}\n")  # Hydra's, then the kill
-    rundir.release(sweep)
+    life.release(sweep)
     with pytest.raises(ConfigError, match="already holds a sweep"):
         rundir.check_new_dir(sweep, overwrite=False, what="sweep")
     rundir.check_new_dir(sweep, overwrite=True, what="sweep")

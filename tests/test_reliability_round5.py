@@ -13,6 +13,7 @@ import pytest
 
 from conftest import run_cli
 from ppo_torchrl import evaluate, export, report, rundir
+from ppo_torchrl.lifecycle import Lifecycle
 from ppo_torchrl.errors import guarded
 from test_bad_input import finished_run, refused, tree_digest  # noqa: F401  (the module's finished run)
 from test_reliability_round3 import RUN, copy_of
@@ -126,8 +127,9 @@ def test_a_write_cut_after_its_listing_leaves_a_file_the_next_command_replaces(t
     from ppo_torchrl.ownership import digest
 
     run = tmp_path / "run"
-    rundir.claim(run)
-    rundir.commit(run)
+    life = Lifecycle()
+    life.claim(run)
+    life.commit(run)
     rundir.atomic_write_bytes(run / "policy.pt", lambda f: f.write(b"old"), owner=run)
     rundir.record(run, [run / "policy.pt"])
     (run / "new").write_bytes(b"new")
@@ -138,7 +140,7 @@ def test_a_write_cut_after_its_listing_leaves_a_file_the_next_command_replaces(t
     (run / "policy.pt").write_bytes(b"the user's")
     with pytest.raises(ConfigError, match="its bytes changed"):
         rundir.check_replaceable(run, [run / "policy.pt"])
-    rundir.release(run)
+    life.finish()
 
 
 # ---------------------------------------------------------------- 3. empty or absurd values are bad input

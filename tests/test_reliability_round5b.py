@@ -15,7 +15,7 @@ import time
 import pytest
 
 from conftest import ROOT, compose_config
-from ppo_torchrl import evaluate, export, report, rundir
+from ppo_torchrl import evaluate, export, report
 from test_bad_input import finished_run, refused, tree_digest  # noqa: F401  (the module's finished run)
 from test_reliability_round3 import RUN, copy_of
 from test_reliability_round5 import ran
@@ -72,10 +72,7 @@ def test_an_overwrite_refuses_while_an_evaluate_reads_the_run(finished_run, tmp_
     try:
         wait_for_lock(run, "READ", reader)
         before = tree_digest(run)
-        try:
-            code, lines = refused([*RUN, f"hydra.run.dir={run}", "overwrite=true"], capsys)
-        finally:
-            rundir.finish()  # had it been claimed: the old run back in its dir, the lock let go
+        code, lines = refused([*RUN, f"hydra.run.dir={run}", "overwrite=true"], capsys)  # a check: nothing kept
         assert code == 2 and len(lines) == 1, lines
         assert f"is in use by pid {reader.pid}" in lines[0] and "reading it" in lines[0], lines
         assert tree_digest(run) == before and not list(tmp_path.glob("run.replaced-*"))
@@ -134,9 +131,13 @@ def test_resume_and_evaluate_refuse_a_robot_model_changed_since_the_run(go1_run,
         assert tree_digest(run) == before
     finally:
         model.write_text(original)
-    from ppo_torchrl.resume import check_resume
+    from ppo_torchrl.lifecycle import Lifecycle
 
-    assert check_resume(str(run), ["collector.total_frames=1024"]) == run  # the model it trained on: accepted
+    life = Lifecycle()
+    try:  # the model it trained on: accepted
+        assert life.resume(str(run), ["collector.total_frames=1024"]).run_dir == run
+    finally:
+        life.finish()
 
 
 def test_a_checkpoint_that_recorded_no_model_is_not_checked(tiny_cfg):

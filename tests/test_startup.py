@@ -5,7 +5,7 @@ import time
 import pytest
 
 from ppo_torchrl import checkpoint
-from ppo_torchrl.config import resume_config
+from ppo_torchrl.lifecycle import resume_config
 from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.startup import describe_start
 from ppo_torchrl.trainer import Trainer

@@ -110,7 +110,7 @@ def test_a_workers_run_checkpoints_evaluates_exports_and_resumes(tiny_cfg, tmp_p
     assert export.main([f"run={tmp_path}"]).is_file()
 
     from ppo_torchrl.checkpoint import load
-    from ppo_torchrl.config import resume_config
+    from ppo_torchrl.lifecycle import resume_config
 
     state = load(tmp_path / "checkpoints" / "last.pt")
     assert state["normalization"]["collector"] is not None and state["normalization"]["return"] is not None

@@ -22,5 +22,6 @@ from ppo_torchrl.collectors.collection import Collection
 __all__ = ["CHOICES", "Collection", "describe_backend", "make_collector", "resolve_backend"]
 
 
-def make_collector(cfg, ac, seed: int, device: torch.device) -> Collection:
-    return Collection(cfg, ac, seed, device)
+def make_collector(cfg, ac, seed: int, device: torch.device, first_env=None) -> Collection:
+    """first_env: a Gymnasium env of cfg.env already built (the command's check built it), the collection's env 0."""
+    return Collection(cfg, ac, seed, device, first_env)

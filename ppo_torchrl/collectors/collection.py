@@ -52,7 +52,7 @@ BATCH_KEYS = ["observation", "action", ("next", "observation"), ("next", "reward
 
 
 class Collection:
-    def __init__(self, cfg, ac, seed: int, device: torch.device):
+    def __init__(self, cfg, ac, seed: int, device: torch.device, first_env=None):
         c = cfg.collector
         backend = resolve_backend(cfg)
         self.fast = backend != "torchrl"  # FastCollector or its subclass (envpool): seeded here
@@ -64,7 +64,7 @@ class Collection:
                       env_device="cpu", storing_device=device)
         # In one process, the env the collector steps; with workers, the main process's copy of the
         # transforms that holds the merged statistics (never stepped).
-        self.env = make_torchrl_env(cfg.env, num_envs=c.num_envs, seed=seed, **env_kwargs)
+        self.env = make_torchrl_env(cfg.env, num_envs=c.num_envs, seed=seed, first_env=first_env, **env_kwargs)
         self.state = env_state_of(self.env)
         self._key = env_state_key(self.env)
         self._watch: Optional[WorkerWatch] = None  # with worker processes: a death ends the run at once
