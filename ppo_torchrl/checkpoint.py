@@ -17,7 +17,7 @@ from typing import Optional
 import torch
 
 from ppo_torchrl.errors import ConfigError
-from ppo_torchrl.rundir import atomic_write_bytes
+from ppo_torchrl.rundir import atomic_write_bytes, moved_aside
 from ppo_torchrl.safe_pickle import load_torch, refused_name
 
 LAST = "last.pt"
@@ -105,11 +105,13 @@ def resolve_checkpoint(run_dir: Path, which: str) -> Path:
     without one (no eval saved it: zoo/quadruped_climb ships last.pt alone) is `last`, said on stderr;
     a checkpoint that is not there is one line naming the ones that are."""
     run_dir = Path(run_dir)
+    aside = moved_aside(run_dir)
+    moved = f"; overwrite=true moved the run that was there to {aside}: run={aside}" if aside else ""
     if not run_dir.exists():
-        raise ConfigError(f"run={run_dir}: no such dir")
+        raise ConfigError(f"run={run_dir}: no such dir{moved}")
     found = run_dir / "checkpoints"
     if not found.is_dir():
-        raise ConfigError(f"run={run_dir} is not a ppo_torchrl run dir (no checkpoints/)")
+        raise ConfigError(f"run={run_dir} is not a ppo_torchrl run dir (no checkpoints/){moved}")
     if which in ("best", "last"):
         path = found / f"{which}.pt"
         if which == "best" and not path.exists() and (found / LAST).is_file():

@@ -95,7 +95,7 @@ def message_of(error: BaseException) -> str:
         todo = ("free some space (or pick another dir)" if error.errno in (errno.ENOSPC, errno.EDQUOT)
                 else "fix the path or its permissions (or pick another path)")
         return f"error: {what}{where}; {todo}, then run it again"
-    log = write_traceback(error, ON_DISK.run_dir)
+    log = write_traceback(error, ON_DISK.run_dir if ON_DISK.started else None)  # a dir not yet kept is rolled back
     first = str(error).strip().splitlines()[0] if str(error).strip() else ""
     return (f"error: internal error ({type(error).__name__}{': ' + first if first else ''}); please report it "
             f"with the traceback in {log}")

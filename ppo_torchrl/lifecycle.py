@@ -16,7 +16,6 @@ config it continues with, the frames it has left) and the trainer's `_restore` (
 from __future__ import annotations
 
 import fcntl
-import glob
 import json
 import os
 import sys
@@ -91,24 +90,28 @@ class Lifecycle:
         from ppo_torchrl.model_record import check_model
 
         run_dir = Path(resume).expanduser()
+        aside = rundir.moved_aside(run_dir)  # a kill (or a full disk) as an overwrite began leaves its old run there
+        moved = f"; overwrite=true moved the run that was there to {aside}: resume={aside}" if aside else ""
         if not run_dir.is_dir():
-            moved = sorted(run_dir.parent.glob(f"{glob.escape(run_dir.name)}{rundir.ASIDE}*")) \
-                if run_dir.parent.is_dir() else []
-            hint = (f"; overwrite=true moved the run that was there to {moved[-1]}: resume={moved[-1]}" if moved
-                    else "; give the run dir of an earlier run")
-            raise ConfigError(f"resume={run_dir}: no such directory{hint}")
+            raise ConfigError(f"resume={run_dir}: no such directory{moved or '; give the run dir of an earlier run'}")
         if rundir.shipped(run_dir):
             raise ConfigError(f"resume={run_dir}: a shipped zoo policy is read-only; train on from it in a dir of your "
                               f"own with init_from={run_dir}")
         if not (run_dir / "checkpoints" / checkpoint.LAST).is_file():
-            stopped = [d for d in sorted(run_dir.glob("seed*")) if (d / "checkpoints" / checkpoint.LAST).is_file()
+            stopped = [d for d in sorted(run_dir.glob("seed*")) if rundir.is_run(d)
                        and '"status": "finished"' not in _read(d / "summary.json")]
             if (run_dir / "trial.json").is_file() or stopped:  # a trial_seeds run: its seeds are runs of their own
-                then = (f"resume={stopped[0]} continues its stopped seed" if stopped else "its seeds are all finished")
+                resumable = [d for d in stopped if (d / "checkpoints" / checkpoint.LAST).is_file()]
+                then = (f"resume={resumable[0]} continues its stopped seed" if resumable else
+                        f"its {stopped[0].name} stopped before its first checkpoint (nothing to resume)" if stopped
+                        else "its seeds are all finished")
+                again = ("the sweep's command with overwrite=true runs the study on (the stopped trial counts as "
+                         "failed)" if rundir.is_run(run_dir.parent) else "overwrite=true starts the "
+                         "trial again")
                 raise ConfigError(f"resume={run_dir} is a trial of several seeds (trial.json), each seed a run of its "
-                                  f"own: {then}; overwrite=true starts the trial again")
+                                  f"own: {then}; {again}")
             raise ConfigError(f"resume={run_dir} is not a ppo_torchrl run dir with a checkpoint: it needs "
-                              "checkpoints/last.pt")
+                              f"checkpoints/last.pt{moved}")
         state = checkpoint.load(run_dir / "checkpoints" / checkpoint.LAST)
         cfg = resume_config(run_dir, [o for o in overrides if not o.startswith("resume=")], state, announce=True)
         self.check(cfg, keep_env=True)
@@ -162,18 +165,25 @@ class Lifecycle:
         except ConfigError:
             self.release(directory)
             raise
-        aside = None
+        aside, earlier = None, None
         if overwrite and not resume and what != "job" and directory.is_dir() and rundir.holds_files(directory):
             aside = self._move_aside(directory)
+        elif not resume and what != "job":  # empty, or left by a command stopped as it began: name an old run
+            earlier = rundir.moved_aside(directory)
         self.lock(directory)
         if resume:
             return directory
-        manifest = not (directory / MANIFEST).exists()
-        if manifest:  # the dir is the app's from its first file: a kill during start-up leaves a run dir
-            rundir.atomic_write_json(directory / MANIFEST, {"app": "ppo_torchrl", "files": []})
         before = set() if what == "job" else set(rundir.files_in(directory))
-        self._pending[directory.resolve()] = {"what": what, "created": created, "aside": aside, "before": before,
-                                              "manifest": manifest}
+        state = {"what": what, "created": created, "aside": aside, "before": before, "manifest": False,
+                 "earlier": earlier}
+        self._pending[directory.resolve()] = state
+        if not (directory / MANIFEST).exists():  # the dir is the app's from its first file: a kill during start-up
+            try:                                 # leaves a run dir
+                rundir.atomic_write_json(directory / MANIFEST, {"app": "ppo_torchrl", "files": []})
+            except BaseException:  # a full disk, a signal: the old run back in its dir, nothing of this command left
+                self.rollback(directory)
+                raise
+            state["manifest"] = True
         return directory
 
     def _move_aside(self, directory: Path) -> Path:
@@ -213,6 +223,9 @@ class Lifecycle:
         if state is not None and state["aside"]:
             print(f"overwrite=true: the {state['what']} that was in {directory} is now {state['aside']} (delete it "
                   "when you no longer need it)", file=sys.stderr, flush=True)
+        elif state is not None and state["earlier"]:  # e.g. a kill as an overwrite began: its old run, named
+            print(f"note: {state['earlier']} holds the {state['what']} an earlier overwrite=true moved out of "
+                  f"{directory} (delete it when you no longer need it)", file=sys.stderr, flush=True)
         rundir.record(directory)
 
     def rollback(self, directory: Optional[Path] = None) -> None:

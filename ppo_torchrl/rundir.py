@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import errno
 import fcntl
+import glob
 import json
 import os
 import re
@@ -40,6 +41,9 @@ from ppo_torchrl.ownership import MANIFEST, digest, holder, inside_run, relative
 STASH = ".replaced"  # earlier versions moved an overwritten run's files here; one left by a kill is moved aside whole
 ASIDE = ".replaced-"  # overwrite=true: <dir>.replaced-<time> holds the run it replaced
 LEGACY_LOCK = ".lock"  # earlier versions locked a file of this name; a leftover one is ours
+# The temp file of a manifest write cut short (a kill as a claim began, e.g. just after overwrite moved the old run
+# aside): the app's, in a dir that holds nothing else a new run may start.
+MANIFEST_TMP = re.compile(rf"^\.{re.escape(MANIFEST)}\.[^/]+\.tmp$")
 # What the app writes, by place. logs/ is the loggers' (any name). A run or a resume writes TRAIN_FILES, which
 # `record` lists by name and time; evaluate, export and report list the files they write as they write them.
 TRAIN_FILES = (r"config\.yaml|metrics\.csv|summary\.json|error\.log|__main__\.log"
@@ -261,7 +265,7 @@ def foreign_files(directory: Path) -> List[str]:
     files = files_in(directory)
     ours = listed(directory)
     if ours is None:
-        return [f for f in files if f != LEGACY_LOCK]
+        return [f for f in files if f != LEGACY_LOCK and not MANIFEST_TMP.match(f)]
     ours = set(ours)
     nested = {}  # a run dir inside (relative) -> its listed files
     for root, _, names in os.walk(directory):
@@ -271,10 +275,10 @@ def foreign_files(directory: Path) -> List[str]:
     def own(name: str) -> bool:
         if name in ours or UNLISTED_OK.match(name):
             return True
-        for inner, listed_there in nested.items():
-            if name.startswith(inner + "/"):
-                rest = name[len(inner) + 1:]
-                return rest == MANIFEST or rest in listed_there or bool(UNLISTED_OK.match(rest))
+        # the run dir nearest the file answers for it: a trial's seed<k>/ inside a sweep's job, not the job
+        for inner in sorted((d for d in nested if name.startswith(d + "/")), key=len, reverse=True)[:1]:
+            rest = name[len(inner) + 1:]
+            return rest == MANIFEST or rest in nested[inner] or bool(UNLISTED_OK.match(rest))
         return False
 
     return [f for f in files if not own(f)]
@@ -301,7 +305,7 @@ def check_new_dir(directory: Path, overwrite: bool, what: str = "run") -> None:
         raise ConfigError(f"the {what} dir {directory} is a file; give {key} a directory")
     if not directory.is_dir():
         return
-    if not [f for f in files_in(directory) if f != LEGACY_LOCK] and not job_dirs(directory):
+    if not [f for f in files_in(directory) if f != LEGACY_LOCK and not MANIFEST_TMP.match(f)] and not job_dirs(directory):
         return  # empty (empty folders, a stale lock file of an earlier version): a new run may use it
     if what == "run" or is_run(directory):  # a dir with a manifest (a run's, a trial's, a sweep's) answers by it
         foreign, has_run = foreign_files(directory), is_run(directory)
@@ -324,6 +328,16 @@ def check_new_dir(directory: Path, overwrite: bool, what: str = "run") -> None:
         hint = f"continue it with resume={directory}, " if what == "run" else ""
         raise ConfigError(f"{directory} already holds a {what}: {hint}pick a new dir with {key}=<dir>, "
                           "or replace it with overwrite=true")
+
+
+def moved_aside(directory: Path) -> Optional[Path]:
+    """The newest sibling <dir>.replaced-<time> that overwrite=true moved an old run of `directory` to, or None."""
+    directory = Path(directory).expanduser()
+    try:
+        siblings = [p for p in directory.parent.glob(f"{glob.escape(directory.name)}{ASIDE}*") if p.is_dir()]
+    except OSError:
+        return None
+    return max(siblings, key=lambda p: p.name) if siblings else None
 
 
 def shipped(directory: Path) -> bool:

@@ -221,6 +221,7 @@ def test_an_internal_error_is_one_line_exit_1_and_its_traceback_in_the_run_dir(t
     if debug:
         monkeypatch.setenv("PPO_TORCHRL_DEBUG", "1")
     monkeypatch.setattr(ON_DISK, "run_dir", tmp_path)
+    monkeypatch.setattr(ON_DISK, "started", True)  # the run is kept: its error.log with it
 
     def buggy():
         raise KeyError("a bug")

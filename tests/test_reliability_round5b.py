@@ -230,3 +230,126 @@ def test_progress_lines_come_at_most_print_every_s_apart(monkeypatch, capsys):
             printed.append(clock[0])
     gaps = [b - a for a, b in zip(printed, printed[1:])]
     assert gaps and max(gaps) <= 10.0 and min(gaps[:-1]) >= 5.0, gaps
+
+
+# ---------------------------------------------------------------- a kill as an overwrite began
+
+def test_a_dir_left_with_only_the_manifests_temp_file_names_the_run_moved_aside(finished_run, tmp_path, capsys):
+    """kill -9 just after overwrite=true moved the old run aside, as the new manifest was being written: the dir
+    held only that temp file. resume= said it needs checkpoints/last.pt, and a new run or an overwrite refused the
+    temp file as not the app's (5 of 5 tries). Now resume= and evaluate name the sibling that holds the run, a new
+    run takes the dir, and its start names the sibling."""
+    from ppo_torchrl.lifecycle import Lifecycle
+
+    run = tmp_path / "run"
+    aside = copy_of(finished_run, tmp_path).rename(tmp_path / "run.replaced-20261128-120000")
+    run.mkdir()
+    (run / "..ppo_torchrl.json.k9x2_q.tmp").write_text('{"app": "ppo_')  # what the kill left
+    code, lines = refused([f"resume={run}", "collector.total_frames=1024"], capsys)
+    assert code == 2 and len(lines) == 1 and f"resume={aside}" in lines[0], lines
+    code, lines = ran(evaluate.main, [f"run={run}", "episodes=1"], capsys)
+    assert code == 2 and len(lines) == 1 and f"run={aside}" in lines[0], lines
+    life = Lifecycle()
+    try:
+        life.new_run(run)  # the leftover is the app's: a new run may start there (overwrite=true too)
+        life.commit(run)
+    finally:
+        life.finish()
+    note = capsys.readouterr().err
+    assert f"note: {aside} holds the run an earlier overwrite=true moved out of {run}" in note, note
+    assert (aside / "checkpoints" / "last.pt").is_file()  # the old run, untouched
+
+
+def test_a_full_disk_as_an_overwrite_begins_puts_the_old_run_back(finished_run, tmp_path, monkeypatch):
+    """A full disk as overwrite=true wrote the new run's manifest left the old run in its sibling, which no later
+    command named: the claim now rolls back, the old run in its own dir again and no sibling left."""
+    import errno
+
+    from ppo_torchrl import rundir
+    from ppo_torchrl.errors import ConfigError
+    from ppo_torchrl.lifecycle import Lifecycle
+
+    run = copy_of(finished_run, tmp_path)
+    before = tree_digest(run)
+    write = rundir.atomic_write_json
+
+    def full(path, data, owner=None):
+        if path.name == rundir.MANIFEST and path.parent == run:
+            raise OSError(errno.ENOSPC, "No space left on device", str(path))
+        return write(path, data, owner)
+
+    monkeypatch.setattr(rundir, "atomic_write_json", full)
+    life = Lifecycle()
+    with pytest.raises(OSError, match="No space left"):
+        life.claim(run, overwrite=True)
+    life.finish()
+    assert tree_digest(run) == before and not list(tmp_path.glob("*.replaced-*"))
+    with pytest.raises(ConfigError, match="already holds a run"):  # and it is still the run it was
+        Lifecycle().claim(run)
+
+
+def test_a_trial_of_a_sweep_killed_in_a_seed_leaves_a_sweep_the_next_command_takes(tmp_path):
+    """kill -9 in seed 7 of an optuna_seeds trial (before its first checkpoint): the same command, with or without
+    overwrite=true, called the sweep's files not the app's (the trial's manifest answered for its seed's files),
+    and resume=<sweep>/0 said its seeds were all finished. Now the sweep dir is a sweep (overwrite=true replaces
+    it), and resume names the stopped seed and the command that runs the study on."""
+    from ppo_torchrl import rundir
+    from ppo_torchrl.errors import ConfigError
+    from ppo_torchrl.lifecycle import Lifecycle
+
+    sweep, write = tmp_path / "sweep", lambda path, text: rundir.atomic_write_bytes(path, lambda f: f.write(text))
+    life = Lifecycle()
+    life.sweep(sweep)
+    trial = sweep / "0"
+    life.claim(trial, what="job")
+    write(trial / ".hydra" / "config.yaml", b"{}\n")
+    life.commit(trial)
+    for seed, status in (("seed6", b'{"status": "finished"}\n'), ("seed7", None)):
+        life.claim(trial / seed)
+        write(trial / seed / "config.yaml", b"seed: 1\n")
+        write(trial / seed / "metrics.csv", b"frames\n")
+        life.commit(trial / seed)
+        if status:
+            write(trial / seed / "summary.json", status)
+            rundir.record(trial / seed)
+            write(trial / "trial.json", b"{}\n")
+            rundir.record(trial)
+    life.finish()  # then the kill: seed7 has no checkpoint, no summary
+    with pytest.raises(ConfigError, match="already holds a sweep.*overwrite=true"):
+        rundir.check_new_dir(sweep, overwrite=False, what="sweep")
+    rundir.check_new_dir(sweep, overwrite=True, what="sweep")  # replaceable
+    with pytest.raises(ConfigError, match="its seed7 stopped before its first checkpoint.*the sweep's command with "
+                                          "overwrite=true"):
+        Lifecycle().resume(str(trial), [])
+
+
+def test_too_few_open_files_for_the_workers_is_one_line_before_anything_starts(tmp_path):
+    """`ulimit -n 48` and collector.workers=2: each worker's queue printed a traceback, an internal error came after a
+    minute (its error.log then deleted by the rollback) and the sweep ran on. Now: one line, exit 1, nothing written."""
+    command = (f"ulimit -n 48; exec {sys.executable} -m ppo_torchrl -m env=InvertedPendulum-v4 seed=1,2 "
+               f"collector.workers=2 collector.total_frames=4096 hydra.sweep.dir={tmp_path / 'sweep'}")
+    done = subprocess.run(["bash", "-c", command], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    lines = [line for line in done.stderr.splitlines() if line.strip()]
+    assert done.returncode == 1 and len(lines) == 1, lines
+    assert "collector.workers=2 needs about 128 open files" in lines[0] and "ulimit -n" in lines[0], lines
+    assert not (tmp_path / "sweep").exists()
+
+
+def test_an_internal_error_before_a_run_started_logs_where_the_rollback_leaves_it(tmp_path, monkeypatch, capsys):
+    """The error line named <job dir>/error.log, which the rollback of the refused job then deleted: a run not yet
+    started (its dir is rolled back) logs to a temp file the line names."""
+    import re
+
+    from ppo_torchrl.errors import guarded
+    from ppo_torchrl.signals import ON_DISK
+
+    monkeypatch.setattr(ON_DISK, "run_dir", tmp_path)
+    monkeypatch.setattr(ON_DISK, "started", False)
+
+    def buggy():
+        raise KeyError("a bug")
+
+    with pytest.raises(SystemExit):
+        guarded(buggy)
+    log = re.search(r"traceback in (\S+)$", capsys.readouterr().err.strip()).group(1)
+    assert not (tmp_path / "error.log").exists() and "raise KeyError" in open(log).read()
