@@ -22,9 +22,10 @@ if sys.argv[:1] == ["-m"]:
 
     install_for_startup()
     guarded(check_interpreter)  # the system Python, not the project's: one line before the heavy imports fail
-    from ppo_torchrl.usage import answer_help
+    from ppo_torchrl.usage import answer_help, show_starting
 
     answer_help(sys.orig_argv)  # evaluate --help, export --help: the page before torch is imported
+    show_starting()  # on a terminal: a first line at once, replaced by the command's own
 
 __version__ = "0.1.0"
 __all__ = ["train", "load", "evaluate_run", "Run", "Policy"]

@@ -1,6 +1,7 @@
-"""The usage pages of evaluate and export, plain text: importable before torch, so that `--help` answers at once
-(the package's __init__ answers `python -m ppo_torchrl.evaluate --help` before the heavy imports: under a second,
-it took 6-10 s). Each page: (usage, the arguments with their defaults, their meanings, what the command does)."""
+"""What a command shows before its heavy imports (the package's __init__ calls these): the usage pages of evaluate
+and export, plain text, so that `--help` answers at once (under a second; it took 6-10 s), and on a terminal a
+status line that the command's first real line replaces. Each page: (usage, the arguments with their defaults,
+their meanings, what the command does)."""
 
 from __future__ import annotations
 
@@ -65,3 +66,36 @@ def answer_help(argv: list) -> None:
     usage, spec, help, about = page
     sys.stdout.flush()
     print_help(usage, {k: (help.get(k, ""), default) for k, default in spec.items()}, about)
+
+
+STATUS = "ppo_torchrl: starting (loading torch) ..."
+
+
+class _Erasing:
+    """A terminal stream whose first write first erases the status line, then hands every write to the stream."""
+
+    def __init__(self, stream, streams: list):
+        self._stream, self._streams, self._erased = stream, streams, False
+
+    def write(self, text: str) -> int:
+        if not self._erased:
+            for other in self._streams:
+                other._erased = True
+            self._stream.write("\r\x1b[K")
+        return self._stream.write(text)
+
+    def __getattr__(self, name: str):
+        return getattr(self._stream, name)
+
+
+def show_starting() -> None:
+    """`python -m ppo_torchrl...` on a terminal: a status line at once (the imports take 3-6 s before the first real
+    line), erased by the first line the command writes, on either stream; nothing when stderr is not a terminal, so
+    a refusal stays one line in a pipe or a log."""
+    if not (sys.stderr.isatty() and sys.stdout.isatty()):
+        return
+    sys.stderr.write(STATUS + "\r")
+    sys.stderr.flush()
+    streams: list = []
+    sys.stdout, sys.stderr = _Erasing(sys.stdout, streams), _Erasing(sys.stderr, streams)
+    streams += [sys.stdout, sys.stderr]

@@ -51,3 +51,13 @@ def test_an_output_is_listed_between_its_whole_temp_file_and_the_rename(tmp_path
     with pytest.raises(ConfigError):
         rundir.check_replaceable(run, [run / "report.png"])
     life.finish()
+
+
+def test_the_apps_real_commands_cut_at_random_keep_every_user_byte():
+    """The property on the app's own commands (issue 60 item 4): `python -m ppo_torchrl` runs, sweeps and trials,
+    resume=, overwrite=true, evaluate, export and report on InvertedPendulum-v4, each cut by SIGINT or kill -9 at a
+    random instant or let finish, among a user's edits; one short sequence here, many in the long mode
+    (`python benchmarks/data_safety.py --real`)."""
+    log = []
+    assert data_safety.sequence(3, steps=5, real=True, log=log) == [], log
+    assert any(" -> " in line for line in log), log  # real commands ran, not only a user's edits

@@ -353,3 +353,32 @@ def test_an_internal_error_before_a_run_started_logs_where_the_rollback_leaves_i
         guarded(buggy)
     log = re.search(r"traceback in (\S+)$", capsys.readouterr().err.strip()).group(1)
     assert not (tmp_path / "error.log").exists() and "raise KeyError" in open(log).read()
+
+
+def test_on_a_terminal_the_first_line_comes_at_once_and_a_refusal_stays_one_line(tmp_path):
+    """Every entry point was silent 5-10 s before its first line (the imports). On a terminal a status line now
+    comes at once; the command's first line erases it, so a refusal still reads as its one line."""
+    import pty
+    import select
+
+    began = time.monotonic()
+    pid, fd = pty.fork()
+    if pid == 0:  # the child: the command on a terminal
+        os.chdir(ROOT)
+        os.execv(sys.executable, [sys.executable, "-m", "ppo_torchrl", "env=InvertedPendulum-v4", "optim.lr=-1",
+                                  f"hydra.run.dir={tmp_path / 'run'}"])
+    out, first = b"", None
+    while select.select([fd], [], [], 120)[0]:
+        try:
+            chunk = os.read(fd, 4096)
+        except OSError:  # the terminal closed: the command ended
+            break
+        if not chunk:
+            break
+        first = time.monotonic() - began if first is None else first
+        out += chunk
+    _, status = os.waitpid(pid, 0)
+    shown = out.decode().split("\x1b[K")[-1]  # what the terminal shows once the status line is erased
+    assert first is not None and first < 2.0, first
+    assert os.waitstatus_to_exitcode(status) == 2 and shown.strip() == "error: optim.lr=-1.0 must be > 0", out
+    assert not (tmp_path / "run").exists()
