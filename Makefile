@@ -45,21 +45,28 @@ trot: $(STAMP)
 	$(call stage,$(TROT_DIR)/seed$(SEED),experiment=quadruped_trot_finetune seed=$(SEED) \
 		init_from=$(STAGE1)/checkpoints/last.pt $(ARGS))
 
-# A robot read from its model under the legged recipe (issue 46): experiment=legged_trot on XML in ROBOT_DIR
-# (resumed when a kill stopped it, kept when finished), then its height sweep from the last checkpoint,
-# EPISODES per height at HEIGHTS (in leg lengths l) on episode seeds SWEEP_SEED * 1000 + i, in ROBOT_DIR/sweep,
-# then the run's records (metrics.csv.xz; results/README.md). XML: a path, or a shipped model (menagerie/<robot>/scene.xml).
-#   make robot XML=menagerie/unitree_a1/scene.xml SEED=11 ROBOT_DIR=results/robots/<date>/a1 SWEEP_SEED=<s>
+# A robot read from its model under a legged recipe (RECIPE: legged_trot, issue 46's, frozen; legged_trot_v2, issue 59's)
+# on XML in ROBOT_DIR (resumed when a kill stopped it, kept when finished), then its height sweep from the last
+# checkpoint, EPISODES per height at HEIGHTS (in leg lengths l) on episode seeds SWEEP_SEED * 1000 + i, in
+# ROBOT_DIR/sweep, and the same episodes at 0.25 l in two other worlds, every contact's grip halved
+# (ROBOT_DIR/sweep_grip_half) and the trunk 10% heavier (ROBOT_DIR/sweep_trunk_heavier); then the run's records
+# (metrics.csv.xz; results/README.md). XML: a path, or a shipped model (menagerie/<robot>/scene.xml).
+#   make robot RECIPE=legged_trot_v2 XML=menagerie/unitree_a1/scene.xml SEED=12 SWEEP_SEED=<s> ROBOT_DIR=<dir>
+RECIPE ?= legged_trot
 HEIGHTS ?= 0,0.2l,0.25l,0.3l
 EPISODES ?= 100
 robot: $(STAMP)
 	@test -n "$(XML)" -a -n "$(SEED)" -a -n "$(ROBOT_DIR)" -a -n "$(SWEEP_SEED)" || { echo "error: make robot \
 	needs XML=<model file> SEED=<training seed> ROBOT_DIR=<run dir> SWEEP_SEED=<episode seed>" >&2; exit 2; }
-	$(call stage,$(ROBOT_DIR),experiment=legged_trot env.xml_file=$(XML) seed=$(SEED) logger=csv $(ARGS))
+	$(call stage,$(ROBOT_DIR),experiment=$(RECIPE) env.xml_file=$(XML) seed=$(SEED) logger=csv $(ARGS))
 	$(PY) -m ppo_torchrl.evaluate run=$(ROBOT_DIR) checkpoint=last episodes=$(EPISODES) seed=$(SWEEP_SEED) \
 		heights=$(HEIGHTS) out=$(ROBOT_DIR)/sweep
-	$(PY) -m ppo_torchrl.records $(ROBOT_DIR)/metrics.csv $(ROBOT_DIR)/sweep/height_sweep.json \
-		$(ROBOT_DIR)/sweep/height_sweep_episodes.csv
+	$(PY) -m ppo_torchrl.evaluate run=$(ROBOT_DIR) checkpoint=last episodes=$(EPISODES) seed=$(SWEEP_SEED) \
+		heights=0.25l env.legged.friction_scale=0.5 out=$(ROBOT_DIR)/sweep_grip_half
+	$(PY) -m ppo_torchrl.evaluate run=$(ROBOT_DIR) checkpoint=last episodes=$(EPISODES) seed=$(SWEEP_SEED) \
+		heights=0.25l env.legged.trunk_mass_scale=1.1 out=$(ROBOT_DIR)/sweep_trunk_heavier
+	$(PY) -m ppo_torchrl.records $(ROBOT_DIR)/metrics.csv $(foreach d,sweep sweep_grip_half sweep_trunk_heavier,\
+		$(ROBOT_DIR)/$(d)/height_sweep.json $(ROBOT_DIR)/$(d)/height_sweep_episodes.csv)
 
 # stage(run dir, overrides): start the run there, resume it when a run there stopped, skip it when it finished.
 # A run committed mid-way to results/ holds metrics.csv.xz only: its metrics.csv comes back before the resume.

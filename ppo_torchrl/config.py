@@ -93,6 +93,11 @@ class LocomotionConfig:
     # each control step (a trot's swing lasts about half its period; a foot held up is not a trot). 0: off.
     long_swing_cost_weight: float = 0.0
     long_swing_limit: float = 0.5
+    # A world that is not the one trained on (evaluate's robustness figures, issue 59): every contact's friction
+    # (each geom's, the feet's and the floor's: MuJoCo takes the larger of a pair) and the main body's mass and
+    # inertia, each x this.
+    friction_scale: float = 1.0
+    trunk_mass_scale: float = 1.0
     # Floor each step's reward at 0 (legged_gym's only_positive_rewards): while the costs outweigh the
     # forward and healthy rewards (early, exploring), ending the episode by a fall does not pay.
     only_positive_rewards: bool = False
@@ -179,6 +184,8 @@ class LeggedConfig:
     long_swing_cost_weight: float = 0.0  # - w x the share of feet in the air longer than long_swing_limit
     long_swing_limit: float = 2.0  # x sqrt(l / g): 0.75 of the trot clock's period (0.42 s for a Go1, 0.49 s ANYmal B)
     torque_cost_weight: float = 0.42  # x sum (torque / (m g l))^2
+    friction_scale: float = 1.0  # x every contact's friction: the grip (the robustness figure: 0.5)
+    trunk_mass_scale: float = 1.0  # x the trunk's mass and inertia (the robustness figure: 1.1)
     joint_speed_cost_weight: float = 0.02  # x sum (joint speed x sqrt(l / g))^2
     foot_slip_cost_weight: float = 0.25  # x sum over feet down of (foot speed / sqrt(g l))^2
     base_height_cost_weight: float = 1.25  # x ((trunk height above the ground - its standing height) / l)^2

@@ -148,6 +148,37 @@ def test_eval_measures_joint_torque_against_the_models_own_limits():
     assert figures["driven"]["torque_at_limit_share"] > 0.0
 
 
+def test_the_robustness_worlds_halve_every_contacts_grip_and_weigh_the_trunk_down():
+    """env.legged.friction_scale=0.5: every geom's friction halved (a contact takes the larger of its pair's, so the
+    grip halves: halving the floor alone would leave a Go1's feet at 0.6 of 1.0); trunk_mass_scale=1.1: the trunk
+    10% heavier, inertia too; a heavier trunk settles lower standing. The model file is not touched."""
+    from ppo_torchrl.compose import compose
+    from ppo_torchrl.envs import make_gym_env
+
+    text = scene("unitree_go1").parent.joinpath("go1.xml").read_text()
+    envs = {}
+    for name, extra in (("plain", []), ("world", ["env.legged.friction_scale=0.5", "env.legged.trunk_mass_scale=1.1"])):
+        cfg = compose(["env=legged", f"env.xml_file={scene('unitree_go1')}", "env.locomotion.reset_noise_scale=0", *extra])
+        envs[name] = make_gym_env(cfg.env).unwrapped
+    plain, world = envs["plain"], envs["world"]
+    assert np.allclose(world.model.geom_friction, 0.5 * plain.model.geom_friction)
+    trunk = plain._body_id
+    assert world.model.body_mass[trunk] == pytest.approx(1.1 * plain.model.body_mass[trunk])
+    assert np.allclose(world.model.body_inertia[trunk], 1.1 * plain.model.body_inertia[trunk])
+    heights = {}
+    for name, env in envs.items():
+        env.reset(seed=0)
+        for _ in range(int(round(1.0 / env.dt))):
+            env.step(np.zeros(env.model.nu))
+        heights[name] = float(env.data.xpos[trunk][2])
+    assert heights["world"] < heights["plain"]
+    assert scene("unitree_go1").parent.joinpath("go1.xml").read_text() == text
+    with pytest.raises(ConfigError, match="friction_scale=0.0 must be > 0"):
+        from ppo_torchrl.validation import validate_config
+
+        validate_config(compose(["env=legged", f"env.xml_file={scene('unitree_go1')}", "env.legged.friction_scale=0"]))
+
+
 def test_torque_motors_become_pd_servos_around_the_standing_pose_with_gains_from_the_model():
     """Go2's torque motors: kp = peak torque / 0.3 rad, kd = 2 sqrt(kp I); used as Menagerie ships them (its
     keyframe's ctrl, angles, sent as torques) the robot collapses to 0.077 m (the robots' README)."""

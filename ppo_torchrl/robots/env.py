@@ -70,7 +70,8 @@ LEGGED_KEYS = ("heading", "target_speed", "torque_limit", "joint_speed_limit", "
                "action_rate_cost_weight", "foot_slip_cost_weight", "base_height_cost_weight", "base_height_target",
                "orientation_cost_weight", "body_contact_cost_weight", "feet_air_time_weight", "feet_air_time_target",
                "foot_geoms", "only_positive_rewards", "terminate_on_contact", "healthy_z_above_terrain",
-               "gait_period", "gait_clock_weight", "long_swing_cost_weight", "long_swing_limit", "contacts", "physics_dt")
+               "gait_period", "gait_clock_weight", "long_swing_cost_weight", "long_swing_limit", "contacts", "physics_dt",
+               "friction_scale", "trunk_mass_scale")
 
 
 def register() -> None:
@@ -151,6 +152,7 @@ class LocomotionEnv(StepTerrain, FootContacts, LeggedRewards, AntEnv):
         if self._robot is not None:
             self._drive_robot(float(robot["action_scale"]), bool(robot["saturation_cap"]))
             data.qpos[:] = self.init_qpos
+        self._perturb(float(legged.get("friction_scale") or 1.0), float(legged.get("trunk_mass_scale") or 1.0))
         mujoco.mj_kinematics(model, data)  # the model's initial pose (reset computes it again)
         self._init_z = float(data.xpos[self._body_id][2])
         self._up0 = data.xmat[self._body_id].reshape(3, 3)[2].copy()  # world up in the body frame at the start
@@ -301,6 +303,17 @@ class LocomotionEnv(StepTerrain, FootContacts, LeggedRewards, AntEnv):
                                   "(or forcerange on every actuator)")
             peak = np.abs(model.actuator_forcerange).max(axis=1) * gear
             model.dof_damping[self._act_dofs] += peak / speed
+
+    def _perturb(self, friction: float, trunk_mass: float) -> None:
+        """Another world than the one trained on: every contact's friction (MuJoCo takes the larger of the two geoms':
+        the feet's and the floor's are both scaled, so the grip scales by `friction`) and the main body's mass and
+        inertia scaled (the model file is left as it is)."""
+        model = self.model
+        if friction != 1.0:
+            model.geom_friction[:] *= friction
+        if trunk_mass != 1.0:
+            model.body_mass[self._body_id] *= trunk_mass
+            model.body_inertia[self._body_id] *= trunk_mass
 
     def _drive_robot(self, action_scale: float, cap: bool) -> None:
         """env=legged: the standing pose as the start, torque motors made PD servos (robots/model.py gives
@@ -520,7 +533,8 @@ def locomotion_checks(loco) -> list:
 
     weights = [k for k in loco if str(k).endswith("_weight") and k not in ("forward_reward_weight", "healthy_reward")]
     speed_limit = loco.get("joint_speed_limit")
-    return ([positive(k) for k in ("target_speed", "torque_limit", "base_height_target")]
+    return ([positive(k) for k in ("target_speed", "torque_limit", "base_height_target", "friction_scale",
+                                   "trunk_mass_scale")]
             + [(speed_limit is None or speed_limit >= MIN_JOINT_SPEED_LIMIT,
                 f"env.locomotion.joint_speed_limit={speed_limit} must be >= {MIN_JOINT_SPEED_LIMIT} rad/s "
                 "(or null: as the model has it)")]

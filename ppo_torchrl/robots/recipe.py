@@ -33,7 +33,7 @@ DERIVED = {
                    "torque_cost_weight": "torque_cost_weight", "joint_speed_cost_weight": "joint_speed_cost_weight",
                    "foot_slip_cost_weight": "foot_slip_cost_weight", "base_height_target": None,
                    "base_height_cost_weight": "base_height_cost_weight", "terminate_on_contact": None,
-                   "foot_geoms": None},
+                   "foot_geoms": None, "friction_scale": "friction_scale", "trunk_mass_scale": "trunk_mass_scale"},
     "terrain": {"eval_step_height": "step_height", "step_height_range": "step_height_range",
                 "curriculum_step": "curriculum_step", "curriculum_band": "curriculum_band",
                 "step_distance": "step_distance", "success_margin": "success_margin",
@@ -102,6 +102,8 @@ def derived_values(robot: Robot, legged) -> dict:
             "base_height_target": robot.height,
             "base_height_cost_weight": legged.base_height_cost_weight / l ** 2,
             "terminate_on_contact": [robot.trunk],
+            "friction_scale": legged.get("friction_scale", 1.0),
+            "trunk_mass_scale": legged.get("trunk_mass_scale", 1.0),
         },
         "terrain": {
             "eval_step_height": in_metres(legged.step_height, l),
