@@ -113,6 +113,9 @@ class Lifecycle:
             raise ConfigError(f"resume={run_dir} is not a ppo_torchrl run dir with a checkpoint: it needs "
                               f"checkpoints/last.pt{moved}")
         state = checkpoint.load(run_dir / "checkpoints" / checkpoint.LAST)
+        if "optimizer" not in state:  # records.record_checkpoint: a reported row's, kept light
+            raise ConfigError(f"resume={run_dir}: its last.pt is a record checkpoint (no optimizer state); train on "
+                              f"from it with init_from={run_dir} in a dir of your own")
         cfg = resume_config(run_dir, [o for o in overrides if not o.startswith("resume=")], state, announce=True)
         self.check(cfg, keep_env=True)
         check_model(state, cfg.env, f"resume={run_dir}")  # the robot model it trained on, unchanged

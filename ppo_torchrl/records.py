@@ -5,6 +5,9 @@ it too); `results/README.md` says which records are kept that way. Every reader 
 scripts in benchmarks/) opens it through `open_record`, which takes the plain file when there is one and the
 `.xz` one otherwise, so a run dir under `outputs/` and its record under `results/` read the same.
 `compress` writes the `.xz` beside a plain file and leaves the plain one as it is (records.main: the command).
+A reported row's final checkpoint is kept as a record checkpoint (`record_checkpoint`): its weights, statistics,
+config and counters without the optimizer's state (two thirds of the file), enough to evaluate, export, load and
+init_from it, not to resume it.
 """
 
 from __future__ import annotations
@@ -58,10 +61,26 @@ def compress(path: Union[str, Path]) -> Path:
     return out
 
 
+RECORD = "record"  # the key a record checkpoint carries: what it left out
+
+
+def record_checkpoint(path: Union[str, Path]) -> Path:
+    """Rewrite the checkpoint at `path` as a record checkpoint, in place (atomic): without the optimizer's state."""
+    from ppo_torchrl import checkpoint
+
+    state = checkpoint.load(path)
+    if state.pop("optimizer", None) is not None or RECORD not in state:
+        state[RECORD] = "weights, statistics, config and counters; no optimizer state: evaluate, export, init_from"
+        checkpoint.save(Path(path), state)
+    return Path(path)
+
+
 def main(argv: list) -> int:
-    """python -m ppo_torchrl.records FILE [...]: each FILE's `.xz` record beside it (the plain file stays)."""
+    """python -m ppo_torchrl.records FILE [...]: each FILE's `.xz` record beside it (the plain file stays); a
+    checkpoint (`.pt`) is made a record checkpoint in place."""
     if not argv or any(a.startswith("-") for a in argv):
-        print("usage: python -m ppo_torchrl.records FILE [...]  (writes FILE.xz beside each; FILE stays)", file=sys.stderr)
+        print("usage: python -m ppo_torchrl.records FILE [...]  (writes FILE.xz beside each; FILE stays; a .pt "
+              "checkpoint loses its optimizer state in place)", file=sys.stderr)
         return 2
     missing = [a for a in argv if not Path(a).is_file()]
     if missing:
@@ -69,8 +88,11 @@ def main(argv: list) -> int:
         return 2
     for a in argv:
         try:
-            print(f"wrote {compress(a)}")
+            print(f"wrote {record_checkpoint(a) if a.endswith('.pt') else compress(a)}")
         except FileExistsError as e:
+            print(f"error: {e}", file=sys.stderr)
+            return 2
+        except Exception as e:  # noqa: BLE001 - a damaged checkpoint: checkpoint.load's one line
             print(f"error: {e}", file=sys.stderr)
             return 2
     return 0

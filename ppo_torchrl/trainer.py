@@ -173,6 +173,9 @@ class Trainer:
         state = checkpoint.load(path)
         self._load_networks(state, f"init_from={source}")
         if with_optimizer:
+            if "optimizer" not in state:
+                raise ConfigError(f"init_from={source}: {path} is a record checkpoint (no optimizer state); "
+                                  "leave out init_from_optimizer")
             self.optimizer.load_state_dict(state["optimizer"])
         norm = state["normalization"]
         self.collector.load_state_dict({k: norm.get(k) for k in ("obs", "return")})

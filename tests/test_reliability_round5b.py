@@ -382,3 +382,26 @@ def test_on_a_terminal_the_first_line_comes_at_once_and_a_refusal_stays_one_line
     assert first is not None and first < 2.0, first
     assert os.waitstatus_to_exitcode(status) == 2 and shown.strip() == "error: optim.lr=-1.0 must be > 0", out
     assert not (tmp_path / "run").exists()
+
+
+def test_a_record_checkpoint_evaluates_and_inits_but_says_it_cannot_resume(finished_run, tmp_path, capsys):
+    """A reported row keeps its final checkpoint in results/ (a 40 MiB tree): `python -m ppo_torchrl.records
+    <last.pt>` drops the optimizer's state (two thirds of a robot's 0.65 MB). It evaluates as before; resume= says
+    what it is and what to run instead, in one line; init_from= trains on from it."""
+    import ppo_torchrl
+    from ppo_torchrl import records
+
+    run = copy_of(finished_run, tmp_path)
+    last = run / "checkpoints" / "last.pt"
+    before, size = ppo_torchrl.evaluate_run(run, episodes=2, checkpoint="last"), last.stat().st_size
+    assert records.main([str(last)]) == 0
+    assert last.stat().st_size < size
+    after = ppo_torchrl.evaluate_run(run, episodes=2, checkpoint="last")
+    assert after["returns"] == before["returns"]
+    capsys.readouterr()
+    code, lines = refused([f"resume={run}", "collector.total_frames=4096"], capsys)
+    assert code == 2 and len(lines) == 1 and "record checkpoint" in lines[0] and f"init_from={run}" in lines[0], lines
+    assert records.main([str(last)]) == 0  # again: the same record
+    tiny = ["env=InvertedPendulum-v4", "collector.total_frames=256", "collector.frames_per_batch=256", "loss.epochs=1",
+            "eval.every_frames=0", "eval.final_episodes=1", "eval.video=false", "logger=none", f"init_from={last}"]
+    assert ppo_torchrl.train(tiny, run_dir=tmp_path / "on").summary["frames"] == 256
