@@ -3,6 +3,7 @@
 out=<robot dir>/<sweep>`), and each goal of issue 46 item 5 met or missed, robot by robot.
 
     python benchmarks/robots_table.py <robot dir>[:<sweep dir>] [...] [--sweep sweep] [--goal go1=0.9 ...] [--out table.md]
+    python benchmarks/robots_table.py results/robots/legged_v2_2026-11-28/*_seed1[23] --goals 59 --out <table.md>
 
 <sweep dir> defaults to <robot dir>/<--sweep>. The robot (name, mass, leg length l, feet by corner) is read
 again from the model file the run trained on (its .hydra/config.yaml), so the figures are per corner: LF RF LH
@@ -10,6 +11,9 @@ RH. Success is issue 31's (crossed and not terminated). Goals: a step of 0.25 l 
 --goal (default 0.8; 0.9 for the tuning robots Go1 and ANYmal B); flat ground >= 95% at >= 0.25 sqrt(g l);
 each foot on the ground 35-65% of the time, no foot up > 0.5 s while moving, strides under 3 Hz (flat and
 0.25 l); the joint torques: the largest share of the model's limit and the time some joint is at it.
+--goals 59 (issue 59's, one row per run dir, named by it): 0.25 l >= 90% on every robot; a foot up > 0.5 s while
+moving in <= 10% of episodes; drives at their torque limit <= 25% of the time; and, where the run dir has them, the
+success at 0.25 l with the grip halved (sweep_grip_half/) and the trunk 10% heavier (sweep_trunk_heavier/), no goal.
 """
 
 import argparse
@@ -25,6 +29,8 @@ from ppo_torchrl.robots.model import GRAVITY, read_robot
 
 FLAT_GOAL, SPEED_GOAL, STEP = 0.95, 0.25, 0.25  # flat success, flat speed in sqrt(g l), the step in l
 TUNING_GOAL = {"go1": 0.9, "anymal_b": 0.9}
+ISSUE59 = {"step": 0.9, "long_swing_episodes": 0.10, "torque_at_limit": 0.25}
+WORLDS = (("grip halved", "sweep_grip_half"), ("trunk +10%", "sweep_trunk_heavier"))
 
 
 def robot_of(run_dir: Path):
@@ -42,13 +48,15 @@ def by_corner(robot, values) -> str:
     return " ".join(f"{values[i]:.2f}" for i in order)
 
 
-def rows(entries: list, goals: dict) -> str:
+def rows(entries: list, goals: dict, issue: int = 46) -> str:
     head = ("| robot | mass | l | 0.25 l | success per height (100 episodes each unless said) | flat speed "
             "| each foot on the ground LF RF LH RH: flat; 0.25 l | episodes with a foot up > 0.5 s moving: flat; 0.25 l "
             "| most touchdowns/s | joint torque: peak share of the limit, time at it |")
     out = [head, "|---|---|---|---|---|---|---|---|---|---|"]
+    if issue == 59:
+        out = [head + " 0.25 l: grip halved; trunk +10% |", out[1] + "---|"]
     verdicts = []
-    for name, robot, sweep in entries:
+    for name, robot, sweep, worlds in entries:
         l = robot.leg_length
         heights = in_legs(sweep, l)
         flat, step = heights.get(0.0), heights.get(STEP)
@@ -64,9 +72,11 @@ def rows(entries: list, goals: dict) -> str:
         swings = "; ".join(f"{long_swings(r)[0]:.0%}" for r in shown)
         stride = max(max(r["touchdown_frequency"]) for r in shown)
         torque = ", ".join(f"{r['peak_torque_share']:.2f} / {r['torque_at_limit_share']:.0%}" for r in shown)
+        robust = "; ".join(f"{in_legs(w, l)[STEP]['success_rate']:.0%}" if w and STEP in in_legs(w, l) else "-"
+                           for w in worlds)
         out.append(f"| {name} | {robot.mass:.1f} kg | {l:.3f} m | {STEP * l * 100:.1f} cm | {success} | {speed} "
-                   f"| {shares} | {swings} | {stride:.2f} | {torque} |")
-        goal = goals.get(name, TUNING_GOAL.get(name, 0.8))
+                   f"| {shares} | {swings} | {stride:.2f} | {torque} |" + (f" {robust} |" if issue == 59 else ""))
+        goal = goals.get(robot.name, ISSUE59["step"] if issue == 59 else TUNING_GOAL.get(robot.name, 0.8))
         checks = [
             ("0.25 l >= the robot's goal", step is not None and step["success_rate"] >= goal,
              f"{step['success_rate']:.0%}; goal {goal:.0%}" if step else "not run"),
@@ -81,6 +91,12 @@ def rows(entries: list, goals: dict) -> str:
              f"{max(long_swings(r)[0] for r in shown):.0%} of episodes have one"),
             (f"strides under {STRIDE_HZ:g} Hz", stride < STRIDE_HZ, f"{stride:.2f}"),
         ]
+        if issue == 59:  # a long swing in at most 10% of episodes (not none), and the drives' time at their limit
+            most, at_limit = max(long_swings(r)[0] for r in shown), max(r["torque_at_limit_share"] for r in shown)
+            checks[4] = (f"a foot up > {SWING_S} s moving in <= {ISSUE59['long_swing_episodes']:.0%} of episodes",
+                         most <= ISSUE59["long_swing_episodes"], f"{most:.0%}")
+            checks.append((f"drives at their limit <= {ISSUE59['torque_at_limit']:.0%} of the time",
+                           at_limit <= ISSUE59["torque_at_limit"], f"{at_limit:.0%}"))
         verdicts.append((name, checks))
     out += ["", "| goal | " + " | ".join(name for name, _ in verdicts) + " |", "|---|" + "---|" * len(verdicts)]
     for i, (goal, _, _) in enumerate(verdicts[0][1]):
@@ -94,6 +110,7 @@ def main() -> None:
     parser.add_argument("robots", nargs="+", help="<robot dir>[:<sweep dir>]")
     parser.add_argument("--sweep", default="sweep", help="the sweep's folder in each robot dir")
     parser.add_argument("--goal", nargs="*", default=[], help="<robot>=<share at 0.25 l>, e.g. go1=0.9")
+    parser.add_argument("--goals", type=int, choices=(46, 59), default=46, help="whose goals: issue 46's or 59's")
     parser.add_argument("--out", type=Path)
     args = parser.parse_args()
     goals = {k: float(v) for k, _, v in (g.partition("=") for g in args.goal)}
@@ -102,8 +119,10 @@ def main() -> None:
         run, _, sweep = given.partition(":")
         run = Path(run)
         robot = robot_of(run)
-        entries.append((robot.name, robot, load(Path(sweep) if sweep else run / args.sweep, ".")))
-    text = rows(entries, goals)
+        worlds = [load(run / folder, ".") if (run / folder).is_dir() else None for _, folder in WORLDS]
+        entries.append((run.name if args.goals == 59 else robot.name, robot,
+                        load(Path(sweep) if sweep else run / args.sweep, "."), worlds))
+    text = rows(entries, goals, args.goals)
     if args.out:
         args.out.write_text(text)
     print(text, end="")
