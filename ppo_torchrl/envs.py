@@ -370,7 +370,6 @@ def extra_transforms(env_cfg) -> list:
     return built
 
 
-
 def env_spec(env_cfg, keep_env: bool = False) -> EnvSpec:
     """The env's sizes and action bounds, read from the env built from `env_cfg`. keep_env: that env stays open in
     the spec (`EnvSpec.env`) for the training env of the same config to step (make_torchrl_env's first_env), so

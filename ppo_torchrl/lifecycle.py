@@ -98,8 +98,7 @@ class Lifecycle:
             raise ConfigError(f"resume={run_dir}: a shipped zoo policy is read-only; train on from it in a dir of your "
                               f"own with init_from={run_dir}")
         if not (run_dir / "checkpoints" / checkpoint.LAST).is_file():
-            stopped = [d for d in sorted(run_dir.glob("seed*")) if rundir.is_run(d)
-                       and '"status": "finished"' not in _read(d / "summary.json")]
+            stopped = [d for d in sorted(run_dir.glob("seed*")) if rundir.is_run(d) and unfinished(d)]
             if (run_dir / "trial.json").is_file() or stopped:  # a trial_seeds run: its seeds are runs of their own
                 resumable = [d for d in stopped if (d / "checkpoints" / checkpoint.LAST).is_file()]
                 then = (f"resume={resumable[0]} continues its stopped seed" if resumable else
@@ -264,13 +263,6 @@ class Lifecycle:
         for directory in list(self._held):
             self.release(directory)
         self.env_spec()
-
-
-def _read(path: Path) -> str:
-    try:
-        return path.read_text()
-    except (OSError, UnicodeDecodeError):
-        return ""
 
 
 def resume_config(run_dir, overrides, state: dict, announce: bool = False):

@@ -179,7 +179,6 @@ def check_finite(cfg) -> None:
     walk(data, "")
 
 
-
 def resolve_device(name: str):
     import torch
 
