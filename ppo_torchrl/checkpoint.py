@@ -105,12 +105,12 @@ def resolve_checkpoint(run_dir: Path, which: str) -> Path:
     without one (no eval saved it: zoo/quadruped_climb ships last.pt alone) is `last`, said on stderr;
     a checkpoint that is not there is one line naming the ones that are."""
     run_dir = Path(run_dir)
-    aside = moved_aside(run_dir)
-    moved = f"; overwrite=true moved the run that was there to {aside}: run={aside}" if aside else ""
-    if not run_dir.exists():
-        raise ConfigError(f"run={run_dir}: no such dir{moved}")
     found = run_dir / "checkpoints"
-    if not found.is_dir():
+    if not found.is_dir():  # the sibling an overwrite moved the run to is looked for only then
+        aside = moved_aside(run_dir)
+        moved = f"; overwrite=true moved the run that was there to {aside}: run={aside}" if aside else ""
+        if not run_dir.exists():
+            raise ConfigError(f"run={run_dir}: no such dir{moved}")
         raise ConfigError(f"run={run_dir} is not a ppo_torchrl run dir (no checkpoints/){moved}")
     if which in ("best", "last"):
         path = found / f"{which}.pt"
