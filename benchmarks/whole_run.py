@@ -1,6 +1,7 @@
 """What a user waits for: a whole training run of this app beside Stable-Baselines3, process start to exit.
 
     .venv/bin/python benchmarks/whole_run.py --frames 1000000 [--tuned] [--sequential] [--seed 1] [--out results/speed/whole_run]
+        [--backends fast,envpool]
 
 - The app runs with its defaults (periodic evals, checkpoints, csv logging all on):
   `python -m ppo_torchrl env=gym env.id=Hopper-v4 collector.total_frames=N`, whose untuned values are
@@ -12,6 +13,9 @@
 - --sequential: A then B, each alone on the machine and free to use both cores. The app's periodic
   evals then run in its second process (eval.background=auto); its training stays on one thread, as
   SB3's does (1 torch thread each).
+- --backends: the app once per `collector.backend` named (e.g. `fast,envpool`: Gymnasium's step in Python, EnvPool's
+  in C++), each beside the same SB3 run; the raw rate is then measured for both env kinds (EnvPool: one env, one
+  thread, its reset step included) and each app row's share is of its own env kind's raw rate.
 Prints and writes (--out/table.md): wall time, the ratio, the in-loop rate, the share of the raw env
 step rate, peak RSS, and the wall-clock time until the last-100 train return first reaches --score.
 """
@@ -30,6 +34,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "benchmarks"))
+from envpool_speed import envpool_rate  # noqa: E402
 from speed import raw_env_rate  # noqa: E402
 
 # conf/env/Hopper-v4.yaml's tuned values, in SB3's terms (checked against the file at start).
@@ -92,14 +97,19 @@ def main() -> None:
     parser.add_argument("--sequential", action="store_true", help="A then B, each alone on the machine")
     parser.add_argument("--seed", type=int, default=1, help="the seed of both sides (the app's seed=, SB3's seed)")
     parser.add_argument("--out", type=Path, default=ROOT / "results" / "speed" / "whole_run")
+    parser.add_argument("--backends", default="fast", help="the app's collector.backend, one run each (fast,envpool)")
     parser.add_argument("--sb3-child", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args()
+    backends = [b for b in args.backends.split(",") if b]
+    if not backends or set(backends) - {"fast", "envpool", "auto", "torchrl"} or (len(backends) > 1 and not args.sequential):
+        raise SystemExit("error: --backends takes fast, envpool, auto or torchrl; more than one needs --sequential")
     if args.sb3_child:
         return sb3_child(args.frames, args.sb3_child, args.tuned, args.seed)
 
     stamp = time.strftime("%Y-%m-%d_%H-%M-%S")
     work = ROOT / "outputs" / "bench_whole_run" / stamp
-    app_run, sb3_dir = work / "app", work / "sb3"
+    sb3_dir = work / "sb3"
+    app_runs = {b: work / (f"app_{b}" if len(backends) > 1 else "app") for b in backends}
     sb3_dir.mkdir(parents=True)
     env_args = ["env=Hopper-v4"] if args.tuned else ["env=gym", "env.id=Hopper-v4"]
     can_pin = shutil.which("taskset") and os.cpu_count() >= 2 and not args.sequential
@@ -107,13 +117,17 @@ def main() -> None:
     env = {**os.environ, "PYTHONWARNINGS": "ignore", "OMP_NUM_THREADS": "1"}
     # The raw step rate drifts with the shared host by up to ~30% within minutes: measured before and
     # after each side, and the share column divides by the mean of those measurements.
-    raws = [raw_env_rate()]
-    app_cmd = [*pin(0), sys.executable, "-m", "ppo_torchrl", *env_args, f"collector.total_frames={args.frames}",
-               "torch_threads=1", f"seed={args.seed}", f"hydra.run.dir={app_run}"]
+    kinds = {"envpool": lambda: envpool_rate(1, 20_000, 1)} if "envpool" in backends else {}
+    kinds = {"gymnasium": raw_env_rate, **kinds}
+    raws = {kind: [measure()] for kind, measure in kinds.items()}
+    app_cmds = {b: [*pin(0), sys.executable, "-m", "ppo_torchrl", *env_args, f"collector.total_frames={args.frames}",
+                    "torch_threads=1", f"seed={args.seed}", f"collector.backend={b}", f"hydra.run.dir={run}"]
+                for b, run in app_runs.items()}
     sb3_cmd = [*pin(1), sys.executable, __file__, "--frames", str(args.frames), "--sb3-child", str(sb3_dir),
                "--seed", str(args.seed), *(["--tuned"] if args.tuned else [])]
-    walls, app_peak = {}, None
-    groups = [[("app", app_cmd)], [("sb3", sb3_cmd)]] if args.sequential else [[("app", app_cmd), ("sb3", sb3_cmd)]]
+    walls, app_peaks = {}, {}
+    apps = [(f"app_{b}", cmd) for b, cmd in app_cmds.items()]
+    groups = [[app] for app in apps] + [[("sb3", sb3_cmd)]] if args.sequential else [[*apps, ("sb3", sb3_cmd)]]
     for group in groups:
         tick = time.perf_counter()
         procs = {name: subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
@@ -122,37 +136,50 @@ def main() -> None:
             for name, proc in procs.items():
                 if name not in walls and proc.poll() is not None:
                     walls[name] = time.perf_counter() - tick
-                    if name == "app" and "sb3" not in walls:  # the only child waited for so far: its peak
+                    if name != "sb3" and "sb3" not in walls:  # RUSAGE_CHILDREN: the largest child so far
                         import resource
 
-                        app_peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
+                        app_peaks[name] = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
                     if proc.returncode != 0:
                         raise SystemExit(f"{name} failed:\n{proc.stderr.read().decode()[-3000:]}")
             time.sleep(0.5)
-        raws.append(raw_env_rate())
-    raw = sum(raws) / len(raws)
-    summary = json.loads((app_run / "summary.json").read_text())
+        for kind, measure in kinds.items():
+            raws[kind].append(measure())
+    raw = {kind: sum(values) / len(values) for kind, values in raws.items()}
     sb3 = json.loads((sb3_dir / "bench.json").read_text())
+    rows = []
+    for b, run in app_runs.items():
+        summary = json.loads((run / "summary.json").read_text())
+        name = "ppo_torchrl" + (f" (collector.backend={b})" if len(backends) > 1 or b != "fast" else "")
+        rows.append((name, walls[f"app_{b}"], summary["sps"], raw["envpool" if b == "envpool" else "gymnasium"],
+                     time_to_score_app(run, args.score), app_peaks.get(f"app_{b}")))
     frames_app = summary["frames"]
-    rows = [("ppo_torchrl", walls["app"], summary["sps"], time_to_score_app(app_run, args.score), app_peak),
-            ("SB3", walls["sb3"], sb3["inner_sps"], time_to_score_sb3(sb3_dir, args.score), sb3["peak_rss_mb"])]
+    rows.append(("SB3", walls["sb3"], sb3["inner_sps"], raw["gymnasium"], time_to_score_sb3(sb3_dir, args.score),
+                 sb3["peak_rss_mb"]))
+    raw_text = "; ".join(f"raw {kind} Hopper-v4 step rate {raw[kind]:,.0f} steps/s (the mean of "
+                         f"{', '.join(f'{r:,.0f}' for r in raws[kind])})" for kind in kinds)
     setting = "env=Hopper-v4 (tuned; SB3 given the same values)" if args.tuned else "env=gym env.id=Hopper-v4 (SB3's defaults)"
     lines = [f"# Whole run, {setting}, {args.frames:,} frames ({frames_app:,} for the app: whole batches)", "",
              f"`python benchmarks/whole_run.py --frames {args.frames}{' --tuned' if args.tuned else ''}"
-             f"{' --sequential' if args.sequential else ''}{f' --seed {args.seed}' if args.seed != 1 else ''}` ({stamp}); "
+             f"{' --sequential' if args.sequential else ''}{f' --seed {args.seed}' if args.seed != 1 else ''}"
+             f"{f' --backends {args.backends}' if backends != ['fast'] else ''}` ({stamp}); "
              + ("one after the other, each alone on the machine (the app's evals in its second process)"
                 if args.sequential else "side by side, one core each (the app's evals in line)")
-             + f"; raw Hopper-v4 step rate {raw:,.0f} steps/s (the mean of {', '.join(f'{r:,.0f}' for r in raws)}: "
-             "measured before and after each side)", "",
+             + f"; {raw_text}: measured before and after each side", "",
              f"| side | wall s (process) | in-loop frames/s | share of raw env rate | time to last-100 >= {args.score:.0f} (s) | peak RSS MB |",
              "|---|---|---|---|---|---|"]
-    for name, wall, inner, tts, peak in rows:
-        lines.append(f"| {name} | {wall:.0f} | {inner:,.0f} | {inner / raw:.0%} | "
+    for name, wall, inner, own_raw, tts, peak in rows:
+        lines.append(f"| {name} | {wall:.0f} | {inner:,.0f} | {inner / own_raw:.0%} | "
                      f"{'not reached' if tts is None else f'{tts:.0f}'} | {'-' if peak is None else f'{peak:.0f}'} |")
-    lines += ["", f"ratio SB3 wall / app wall: {walls['sb3'] / walls['app']:.2f}x (the goal: >= 3x)"]
+    lines.append("")
+    for b in backends:
+        lines.append(f"ratio SB3 wall / app wall{f' ({b})' if len(backends) > 1 else ''}: "
+                     f"{walls['sb3'] / walls[f'app_{b}']:.2f}x (issue 62's goal: >= 5x)")
     args.out.mkdir(parents=True, exist_ok=True)
-    shutil.copy(app_run / "summary.json", args.out / "app_summary.json")
-    shutil.copy(app_run / "metrics.csv", args.out / "app_metrics.csv")
+    for b, run in app_runs.items():
+        tag = f"_{b}" if len(backends) > 1 else ""
+        shutil.copy(run / "summary.json", args.out / f"app{tag}_summary.json")
+        shutil.copy(run / "metrics.csv", args.out / f"app{tag}_metrics.csv")
     shutil.copy(next(sb3_dir.glob("*.monitor.csv")), args.out / "sb3_monitor.csv")
     (args.out / "table.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
