@@ -11,6 +11,7 @@ composed and every value validated (each job of a sweep too), and the run or swe
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 from typing import Optional
@@ -140,6 +141,9 @@ def cli() -> None:
             return guarded(_run_job, cfg, life)
 
         task = main if life.sweep_dir is not None else run
+        # Hydra's own errors (a full disk as it writes .hydra/) are raised to the one error line (errors.py), not
+        # printed by Hydra as a traceback
+        os.environ["HYDRA_FULL_ERROR"] = "1"
         hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")(task)()
     except BaseException as error:  # a job ends by sys.exit(its code); a signal: 130 / 143
         signalled = signal_in_chain(error) is not None or getattr(error, "code", None) in EXIT_SIGNAL.values()
@@ -157,4 +161,7 @@ def cli() -> None:
 
 
 if __name__ == "__main__":
-    guarded(cli)
+    try:
+        guarded(cli)
+    finally:
+        signals.ignore_from_now()

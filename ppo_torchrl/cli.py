@@ -68,7 +68,7 @@ def print_help(usage: str, arguments: Dict[str, Tuple[str, Any]], about: str = "
 def run(main) -> None:
     """Run an entry point's main(argv) through the one error path (errors.py), signals included."""
     from ppo_torchrl.errors import guarded
-    from ppo_torchrl.signals import install
+    from ppo_torchrl.signals import ignore_from_now, install
 
     def checked(argv: list[str]):
         check_interpreter()
@@ -78,7 +78,10 @@ def run(main) -> None:
         return main(argv)
 
     install()
-    guarded(checked, sys.argv[1:])
+    try:
+        guarded(checked, sys.argv[1:])
+    finally:
+        ignore_from_now()
 
 
 def resolve_run(arg: str) -> Path:

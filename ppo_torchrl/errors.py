@@ -24,7 +24,8 @@ EXIT_TRAINING = 3  # training stopped itself (non-finite loss, gradient or param
 EXIT_BUG = 1  # an internal error: please report
 EXIT_ENVIRONMENT = 1  # the machine: a full disk, no permission, no file locks, a helper process killed
 # OSErrors a user fixes (space, permissions, paths), not bugs: one line naming the path, exit 1.
-USER_FIXABLE = {errno.ENOSPC: "the disk is full", errno.EDQUOT: "the disk quota is used up", errno.EACCES: None,
+USER_FIXABLE = {errno.ENOSPC: "the disk is full", errno.EDQUOT: "the disk quota is used up",
+                errno.EFBIG: "a file reached the file size limit", errno.EACCES: None,
                 errno.EPERM: None, errno.EROFS: None, errno.ENOTDIR: None, errno.EISDIR: None,
                 errno.ENAMETOOLONG: None, errno.ENOLCK: None}
 EXIT_SIGNAL = {2: 130, 15: 143}  # interrupted: 128 + signal number, as shells report it
@@ -93,6 +94,7 @@ def message_of(error: BaseException) -> str:
         what = USER_FIXABLE[error.errno] or error.strerror
         where = f" writing {error.filename}" if error.filename else ""
         todo = ("free some space (or pick another dir)" if error.errno in (errno.ENOSPC, errno.EDQUOT)
+                else "raise the limit (ulimit -f)" if error.errno == errno.EFBIG
                 else "fix the path or its permissions (or pick another path)")
         return f"error: {what}{where}; {todo}, then run it again"
     log = write_traceback(error, ON_DISK.run_dir if ON_DISK.started else None)  # a dir not yet kept is rolled back
@@ -111,9 +113,12 @@ def write_traceback(error: BaseException, run_dir) -> str:
             return path
     except OSError:
         pass
-    fd, path = tempfile.mkstemp(prefix="ppo_torchrl_error_", suffix=".log")
-    with os.fdopen(fd, "w") as f:
-        f.write(text)
+    try:
+        fd, path = tempfile.mkstemp(prefix="ppo_torchrl_error_", suffix=".log")
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+    except OSError as exc:  # nowhere to write it (a full disk): still one line
+        return f"the output of PPO_TORCHRL_DEBUG=1 (no log file could be written: {exc.strerror or exc})"
     return path
 
 

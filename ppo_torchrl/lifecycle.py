@@ -179,9 +179,14 @@ class Lifecycle:
         state = {"what": what, "created": created, "aside": aside, "before": before, "manifest": False,
                  "earlier": earlier}
         self._pending[directory.resolve()] = state
+        if aside is not None and what == "sweep":  # its commit comes at the sweep's end: a kill during a job
+            state["said"] = True                   # would leave the sibling unnamed, so it is named now
+            print(f"overwrite=true: the sweep that was in {directory} is now {aside} (delete it when you no longer "
+                  "need it; it goes back if no job starts)", file=sys.stderr, flush=True)
         if not (directory / MANIFEST).exists():  # the dir is the app's from its first file: a kill during start-up
             try:                                 # leaves a run dir
-                rundir.atomic_write_json(directory / MANIFEST, {"app": "ppo_torchrl", "files": []})
+                files = [] if what == "sweep" else list(rundir.STARTED)  # write-ahead (rundir.STARTED)
+                rundir.atomic_write_json(directory / MANIFEST, {"app": "ppo_torchrl", "files": files})
             except BaseException:  # a full disk, a signal: the old run back in its dir, nothing of this command left
                 self.rollback(directory)
                 raise
@@ -219,16 +224,17 @@ class Lifecycle:
 
     def commit(self, directory: Path) -> None:
         """The new run has started: it keeps its dir (the run it replaced stays where overwrite moved it, named
-        here); list its own files."""
+        here); list its own files, first: a signal or a full disk before they are listed leaves the claim pending,
+        which rollback() undoes (its files are never left unlisted, for the user's)."""
         directory = Path(directory)
+        rundir.record(directory)
         state = self._pending.pop(directory.resolve(), None)
-        if state is not None and state["aside"]:
+        if state is not None and state["aside"] and not state.get("said"):
             print(f"overwrite=true: the {state['what']} that was in {directory} is now {state['aside']} (delete it "
                   "when you no longer need it)", file=sys.stderr, flush=True)
         elif state is not None and state["earlier"]:  # e.g. a kill as an overwrite began: its old run, named
             print(f"note: {state['earlier']} holds the {state['what']} an earlier overwrite=true moved out of "
                   f"{directory} (delete it when you no longer need it)", file=sys.stderr, flush=True)
-        rundir.record(directory)
 
     def rollback(self, directory: Optional[Path] = None) -> None:
         """A claimed dir whose command failed before `commit`: remove what it wrote, put back what it moved aside."""

@@ -4,7 +4,9 @@
   evaluate, export and report write is listed with the sha256 of its bytes, and replaced only while it holds
   them. An output belongs to the run dir that really holds it, however its path is spelled (ownership.py).
   A dir is a run dir only when it has one and every file in it is listed (or is a checkpoint or
-  temporary file of a write killed before it was listed), with no symlink anywhere.
+  temporary file of a write killed before it was listed), with no symlink anywhere. A claim lists the
+  files a run writes before its first listing (STARTED) when it makes the manifest: write-ahead, so a
+  kill or a full disk between such a write and the listing leaves a file the manifest calls the app's.
 - A new run needs a dir that does not exist or is empty. A run dir is refused unless
   `overwrite=true`; a dir holding anything else is always refused (it is somebody's files).
 - `overwrite=true` deletes nothing: it checks the whole dir, takes the lock of every run dir in it
@@ -61,6 +63,10 @@ TRAINED = re.compile(rf"^(?:{TRAIN_FILES}|multirun\.yaml|optimization_results\.y
 UNLISTED_OK = re.compile(r"^(?:(?:seed\d+/)?checkpoints/(?:last|best|frames_\d+)\.pt|(?:.+/)?\.[^/]+\.tmp"
                          r"|\.hydra/(?:config|hydra|overrides)\.yaml|__main__\.log"
                          r"|multirun\.yaml|optimization_results\.yaml)$")  # Hydra's: a sweep killed before it listed them
+
+# The files a run (a trial: trial.json) may write before its first `record`: listed by name, no sha256, in the
+# manifest its claim makes (Lifecycle.claim); `record` drops a name whose file never came.
+STARTED = ("config.yaml", "metrics.csv", "summary.json", "error.log", "trial.json")
 
 ZOO = Path(__file__).resolve().parent.parent / "zoo"  # the shipped policies: read-only to every command
 _BEGAN_NS = time.time_ns()  # this process's start: `record` lists only the files written since
@@ -289,8 +295,9 @@ def job_dirs(directory: Path) -> List[Path]:
 
 
 def holds_files(directory: Path) -> bool:
-    """Anything in the dir: a file (the manifest and an old stash aside) or a job's folder."""
-    return bool(files_in(directory) or job_dirs(directory))
+    """Anything in the dir: a file (the manifest, an old stash and the manifest's temp file a kill left as an
+    overwrite began aside: that dir holds no run, and its start names the sibling that does) or a job's folder."""
+    return bool([f for f in files_in(directory) if not MANIFEST_TMP.match(f)] or job_dirs(directory))
 
 
 def is_run(directory: Path) -> bool:

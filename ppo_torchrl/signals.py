@@ -81,6 +81,14 @@ def install() -> None:
             signal.signal(signum, _interrupt)
 
 
+def ignore_from_now() -> None:
+    """A command's work is done and its last line printed: a signal from here to the process's end (Python's own
+    shutdown, joining threads) would only print Python's "Exception ignored ... KeyboardInterrupt" traceback."""
+    if threading.current_thread() is threading.main_thread():
+        for signum in SIGNALS:
+            signal.signal(signum, signal.SIG_IGN)
+
+
 class StopRequest:
     """The loop's handlers: the first signal sets `signum` (stop after this iteration and save),
     a second one raises `Interrupt` at once."""

@@ -76,6 +76,8 @@ def run_seeds(cfg, run_dir: Path, life) -> float:
             life.rollback(seed_dir)
         mean = statistics.fmean(values)
         pruned = cfg.trial_prune_below is not None and values[-1] < cfg.trial_prune_below and seed != seeds[-1]
+        if not (run_dir / "trial.json").exists():  # listed before it is written (rundir.intend: write-ahead)
+            rundir.intend(run_dir, [run_dir / "trial.json"])
         rundir.atomic_write_json(run_dir / "trial.json", {
             "seeds": seeds[:len(values)], "objective": values, "mean": mean,
             "std": statistics.stdev(values) if len(values) > 1 else 0.0, "pruned": pruned})

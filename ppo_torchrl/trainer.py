@@ -487,6 +487,8 @@ class Trainer:
     def write_summary(self, status: str) -> None:
         path = self.run_dir / "summary.json"
         new = not path.exists()
+        if new:  # listed before it is written (write-ahead): a kill in between leaves a file the manifest calls the app's
+            rundir.intend(self.run_dir, [path])
         rundir.atomic_write_json(path, self.summary(status))
         if new:
             rundir.record(self.run_dir)

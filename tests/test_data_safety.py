@@ -4,6 +4,7 @@ sweeps, trials, resumes, evaluations, exports and reports, cut by SIGINT or kill
 user's files, symlinks and edited manifests; every user byte must stay, and every dir left must be usable or
 explained. Below it, the write of an output that makes a kill at any instant safe."""
 
+import shutil
 import sys
 from pathlib import Path
 
@@ -61,3 +62,82 @@ def test_the_apps_real_commands_cut_at_random_keep_every_user_byte():
     log = []
     assert data_safety.sequence(3, steps=5, real=True, log=log) == [], log
     assert any(" -> " in line for line in log), log  # real commands ran, not only a user's edits
+
+
+def test_a_full_disk_or_a_kill_between_a_runs_write_and_its_listing_leaves_a_dir_overwrite_takes(tmp_path,
+                                                                                                    monkeypatch, capsys):
+    """Found by the long mode's full_disk and race cases: a full disk as a run's commit listed its start-up files
+    left them unlisted and the old run in its sibling (no rollback); a kill -9 between a seed's summary.json and its
+    listing left a dir that overwrite=true called someone else's ("it holds seed1/summary.json, which this app did
+    not write"); a kill -9 as an overwrite wrote its manifest left a dir with the temp file alone, which the next
+    overwrite=true moved aside again, naming that sibling, not the one with the run; a file-size limit (EFBIG) was
+    an internal error, and an internal error with no writable temp dir ended in a traceback from the error path."""
+    import errno
+
+    from ppo_torchrl import errors, rundir
+    from ppo_torchrl.lifecycle import Lifecycle
+
+    def fails(error):
+        def call(*args, **kwargs):
+            raise error
+        return call
+
+    run, life = tmp_path / "run", Lifecycle()
+    life.claim(run)
+    life.commit(run)
+    life.finish()
+    (run / "summary.json").write_text("{}")
+    rundir.record(run)
+    before = sorted(p.relative_to(tmp_path).as_posix() for p in tmp_path.rglob("*"))
+    life = Lifecycle()
+    life.claim(run, overwrite=True)
+    (run / "config.yaml").write_text("seed: 1\n")
+    with monkeypatch.context() as full:
+        full.setattr(rundir, "record", fails(OSError(errno.ENOSPC, "No space left on device")))
+        with pytest.raises(OSError):
+            life.commit(run)
+    life.finish()  # the claim is still pending: rolled back, the old run in its dir again
+    assert sorted(p.relative_to(tmp_path).as_posix() for p in tmp_path.rglob("*")) == before
+    seed = run / "seed1"  # a trial's seed killed after its summary.json and before its listing
+    Lifecycle().claim(seed)
+    (seed / "summary.json").write_text("{}")
+    (seed / "config.yaml").write_text("seed: 1\n")
+    rundir.check_new_dir(run, overwrite=True)  # the app's: overwrite=true takes the dir
+    killed = tmp_path / "killed"  # kill -9 after the move-aside, as the new manifest was written
+    (killed / f".{rundir.MANIFEST}.k9x2.tmp").parent.mkdir()
+    (killed / f".{rundir.MANIFEST}.k9x2.tmp").write_text('{"app": "ppo_')
+    shutil.copytree(run, tmp_path / "killed.replaced-20261128-120000")
+    life = Lifecycle()
+    life.claim(killed, overwrite=True)
+    life.commit(killed)
+    life.finish()
+    assert len(list(tmp_path.glob("killed.replaced-*"))) == 1
+    assert f"note: {tmp_path / 'killed.replaced-20261128-120000'} holds the run" in capsys.readouterr().err
+    assert errors.message_of(OSError(errno.EFBIG, "File too large", "x.pt")).startswith(
+        "error: a file reached the file size limit writing x.pt; raise the limit (ulimit -f)")
+    assert errors.exit_code(OSError(errno.EFBIG, "File too large")) == 1
+    monkeypatch.setattr(errors.tempfile, "mkstemp", fails(FileNotFoundError(2, "No usable temporary directory")))
+    line = errors.message_of(KeyError("a bug"))
+    assert line.startswith("error: internal error (KeyError: 'a bug')") and "no log file could be written" in line
+
+
+def test_a_signal_after_a_command_is_done_is_ignored_not_a_traceback(monkeypatch):
+    """The long mode's race case: a Ctrl-C landing as a finished command's Python shut down (joining its threads)
+    printed Python's "Exception ignored ... KeyboardInterrupt" traceback after the command's last line. Each entry
+    point, once its work is done (or its error line printed), ignores SIGINT and SIGTERM to the end."""
+    import signal
+
+    from ppo_torchrl import cli
+
+    before = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        cli.run(lambda argv: None)
+        assert signal.getsignal(signal.SIGINT) == signal.SIG_IGN and signal.getsignal(signal.SIGTERM) == signal.SIG_IGN
+        for s in before:
+            signal.signal(s, signal.SIG_DFL)
+        with pytest.raises(SystemExit):  # the error path: its line, then the same
+            cli.run(lambda argv: (_ for _ in ()).throw(ValueError("boom")))
+        assert signal.getsignal(signal.SIGINT) == signal.SIG_IGN
+    finally:
+        for s, handler in before.items():
+            signal.signal(s, handler)

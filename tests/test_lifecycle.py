@@ -65,3 +65,22 @@ def test_two_commands_in_one_process_hold_nothing_of_each_other(tmp_path):
     second.commit(tmp_path / "a")
     second.finish()
     assert (tmp_path / "a" / ".ppo_torchrl.json").is_file()  # committed: kept
+
+
+def test_an_overwritten_sweep_names_its_sibling_before_any_job_runs(tmp_path, capsys):
+    """A sweep commits at its end: a kill -9 during a job left the old sweep's sibling unnamed (issue 60's long
+    mode). The overwrite names it as it moves it, and a sweep whose jobs never start puts it back."""
+    sweep = tmp_path / "sweep"
+    life = Lifecycle()
+    life.claim(sweep, what="sweep")
+    life.claim(sweep / "0", what="job")
+    life.commit(sweep / "0")
+    life.finish()
+    capsys.readouterr()
+    life = Lifecycle()
+    life.claim(sweep, overwrite=True, what="sweep")
+    aside = next(tmp_path.glob("sweep.replaced-*"))
+    assert f"the sweep that was in {sweep} is now {aside}" in capsys.readouterr().err  # before any job ran
+    life.finish()  # no job started: the old sweep goes back
+    assert (sweep / "0" / ".ppo_torchrl.json").is_file() and not aside.exists()
+    assert "is now" not in capsys.readouterr().err  # said once
