@@ -5,6 +5,8 @@ it too); `results/README.md` says which records are kept that way. Every reader 
 scripts in benchmarks/) opens it through `open_record`, which takes the plain file when there is one and the
 `.xz` one otherwise, so a run dir under `outputs/` and its record under `results/` read the same.
 `compress` writes the `.xz` beside a plain file and leaves the plain one as it is (records.main: the command).
+A record taken mid-run (a run committed as it stood, then resumed) holds a prefix of the log the run goes on
+writing: `compress` brings it up to date; a record of any other text is refused, never replaced.
 A reported row's final checkpoint is kept as a record checkpoint (`record_checkpoint`): its weights, statistics,
 config and counters without the optimizer's state (two thirds of the file), enough to evaluate, export, load and
 init_from it, not to resume it.
@@ -46,14 +48,18 @@ def read_record_text(path: Union[str, Path]) -> str:
 
 
 def compress(path: Union[str, Path]) -> Path:
-    """Write `<path>.xz` (xz -9, no timestamps: the same bytes from the same text) beside `path`, which stays."""
+    """Write `<path>.xz` (xz -9, no timestamps: the same bytes from the same text) beside `path`, which stays.
+    An `.xz` there already is kept when it holds this text, updated when it holds a prefix of it (the same log,
+    recorded earlier in the run), refused otherwise."""
     path = Path(path)
     out = path.with_name(path.name + SUFFIX)
     text = path.read_bytes()
     if out.exists():
-        if out.is_file() and lzma.decompress(out.read_bytes()) == text:
+        old = lzma.decompress(out.read_bytes()) if out.is_file() else None
+        if old == text:
             return out  # already this record
-        raise FileExistsError(f"{out} exists and holds another text; move it away first")
+        if old is None or not old or not text.startswith(old):
+            raise FileExistsError(f"{out} exists and holds another text; move it away first")
     data = lzma.compress(text, preset=9 | lzma.PRESET_EXTREME)
     tmp = out.with_name(out.name + ".tmp")
     tmp.write_bytes(data)

@@ -4,6 +4,7 @@ on this checkout and on a planted 2 MB file; the records' compressed form read a
 from __future__ import annotations
 
 import importlib.util
+import lzma
 import shutil
 import subprocess
 import sys
@@ -68,6 +69,10 @@ def test_a_compressed_metrics_record_reads_as_the_plain_one(tmp_path):
     assert a.keys() == b.keys() and a["frames"] == b["frames"] == [2048.0, 4096.0]
     assert records.has_record(kept) and not kept.exists()
     assert records.compress(plain) == packed  # the same record again: nothing changes
+    with open(plain, "a") as f:  # the run resumed and logged on: the mid-run record is brought up to date
+        f.write("3,6144,4.0\n")
+    assert records.compress(plain) == packed
+    assert lzma.decompress(packed.read_bytes()) == plain.read_bytes()
     plain.write_text("iteration,frames\n1,2048\n")
     with pytest.raises(FileExistsError):  # another text: the record there is not replaced
         records.compress(plain)
