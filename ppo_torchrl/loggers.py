@@ -137,18 +137,21 @@ def _fmt(value) -> str:
 
 def truncate_logs(run_dir: Path, frames: int) -> None:
     """Drop rows logged after `frames` (metrics.csv and the CSV logger's scalars): on resume the
-    run goes on from its checkpoint, and what was logged past it is logged again."""
+    run goes on from its checkpoint, and what was logged past it is logged again. The rows kept keep their bytes
+    (no newline translation: the csv module ends rows with \\r\\n), so the file stays a prefix of what it was
+    and a record taken mid-run stays a prefix of the finished log (records.compress)."""
     from ppo_torchrl.internals import csv_logger_files
     from ppo_torchrl.rundir import atomic_write_bytes
 
     metrics = Path(run_dir) / "metrics.csv"
     if metrics.exists():  # each file replaced whole: a kill leaves the old rows or the kept ones
-        lines = metrics.read_text().splitlines(keepends=True)
-        col = lines[0].rstrip("\n").split(",").index("frames") if lines else 0
+        lines = metrics.read_bytes().decode().splitlines(keepends=True)
+        col = lines[0].rstrip("\r\n").split(",").index("frames") if lines else 0
         keep = "".join(lines[:1] + [l for l in lines[1:] if int(l.split(",")[col]) <= frames])
         atomic_write_bytes(metrics, lambda f: f.write(keep.encode()))
     for scalars in csv_logger_files(run_dir):
-        kept = "".join(l for l in scalars.read_text().splitlines(keepends=True) if int(l.split(",")[0]) <= frames)
+        lines = scalars.read_bytes().decode().splitlines(keepends=True)
+        kept = "".join(l for l in lines if int(l.split(",")[0]) <= frames)
         atomic_write_bytes(scalars, lambda f, kept=kept: f.write(kept.encode()))
 
 

@@ -78,6 +78,35 @@ def test_a_compressed_metrics_record_reads_as_the_plain_one(tmp_path):
         records.compress(plain)
 
 
+def test_a_resume_keeps_the_bytes_of_the_rows_before_its_checkpoint(tmp_path):
+    """truncate_logs (resume) drops the rows past the checkpoint and keeps the others byte for byte: the csv
+    module's \\r\\n stays, so the log stays a prefix of itself and a mid-run record of it can be brought up to date."""
+    from ppo_torchrl.loggers import MetricsFile, truncate_logs
+
+    log = MetricsFile(tmp_path / "metrics.csv", ["iteration", "frames", "x"])
+    for i in range(1, 5):
+        log.write({"iteration": i, "frames": 2048 * i, "x": 0.5 * i})
+    log.close()
+    before = (tmp_path / "metrics.csv").read_bytes()
+    assert b"\r\n" in before
+    records.compress(tmp_path / "metrics.csv")
+    truncate_logs(tmp_path, 4096)
+    after = (tmp_path / "metrics.csv").read_bytes()
+    assert before.startswith(after) and after.count(b"\r\n") == 3  # header and two rows, as written
+    log = MetricsFile(tmp_path / "metrics.csv", ["iteration", "frames", "x"], append=True)
+    for i in range(3, 7):
+        log.write({"iteration": i, "frames": 2048 * i, "x": 0.5 * i})
+    log.close()
+    (tmp_path / "metrics.csv.xz").unlink()
+    truncate_logs(tmp_path, 8192)
+    records.compress(tmp_path / "metrics.csv")  # a record of the log at 4 rows ...
+    log = MetricsFile(tmp_path / "metrics.csv", ["iteration", "frames", "x"], append=True)
+    log.write({"iteration": 5, "frames": 10240, "x": 2.5})
+    log.close()
+    truncate_logs(tmp_path, 10240)  # ... and a resume at 5: the record is a prefix, brought up to date
+    assert lzma.decompress(records.compress(tmp_path / "metrics.csv").read_bytes()) == (tmp_path / "metrics.csv").read_bytes()
+
+
 def test_the_records_command_refuses_bad_input_in_one_line(tmp_path):
     out = subprocess.run([sys.executable, "-m", "ppo_torchrl.records", str(tmp_path / "missing.csv")],
                          capture_output=True, text=True, cwd=ROOT)
