@@ -143,16 +143,18 @@ def truncate_logs(run_dir: Path, frames: int) -> None:
     from ppo_torchrl.internals import csv_logger_files
     from ppo_torchrl.rundir import atomic_write_bytes
 
+    def keep_rows(path: Path, header: bool) -> None:  # the file replaced whole: a kill leaves the old rows or the kept
+        lines = path.read_bytes().decode().splitlines(keepends=True)
+        head, rows = (lines[:1], lines[1:]) if header else ([], lines)
+        col = head[0].rstrip("\r\n").split(",").index("frames") if head else 0
+        kept = "".join(head + [l for l in rows if int(l.split(",")[col]) <= frames])
+        atomic_write_bytes(path, lambda f: f.write(kept.encode()))
+
     metrics = Path(run_dir) / "metrics.csv"
-    if metrics.exists():  # each file replaced whole: a kill leaves the old rows or the kept ones
-        lines = metrics.read_bytes().decode().splitlines(keepends=True)
-        col = lines[0].rstrip("\r\n").split(",").index("frames") if lines else 0
-        keep = "".join(lines[:1] + [l for l in lines[1:] if int(l.split(",")[col]) <= frames])
-        atomic_write_bytes(metrics, lambda f: f.write(keep.encode()))
+    if metrics.exists():
+        keep_rows(metrics, header=True)
     for scalars in csv_logger_files(run_dir):
-        lines = scalars.read_bytes().decode().splitlines(keepends=True)
-        kept = "".join(l for l in lines if int(l.split(",")[0]) <= frames)
-        atomic_write_bytes(scalars, lambda f, kept=kept: f.write(kept.encode()))
+        keep_rows(scalars, header=False)
 
 
 def amend_last_row(path: Path, frames: int, values: Dict[str, float]) -> bool:

@@ -58,7 +58,7 @@ def compress(path: Union[str, Path]) -> Path:
         old = lzma.decompress(out.read_bytes()) if out.is_file() else None
         if old == text:
             return out  # already this record
-        if old is None or not old or not text.startswith(old):
+        if not old or not text.startswith(old):  # not a file, empty, or another text
             raise FileExistsError(f"{out} exists and holds another text; move it away first")
     data = lzma.compress(text, preset=9 | lzma.PRESET_EXTREME)
     tmp = out.with_name(out.name + ".tmp")

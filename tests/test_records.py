@@ -104,7 +104,8 @@ def test_a_resume_keeps_the_bytes_of_the_rows_before_its_checkpoint(tmp_path):
     log.write({"iteration": 5, "frames": 10240, "x": 2.5})
     log.close()
     truncate_logs(tmp_path, 10240)  # ... and a resume at 5: the record is a prefix, brought up to date
-    assert lzma.decompress(records.compress(tmp_path / "metrics.csv").read_bytes()) == (tmp_path / "metrics.csv").read_bytes()
+    packed = records.compress(tmp_path / "metrics.csv")
+    assert lzma.decompress(packed.read_bytes()) == (tmp_path / "metrics.csv").read_bytes()
 
 
 def test_the_records_command_refuses_bad_input_in_one_line(tmp_path):
