@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from ppo_torchrl.records import has_record, open_record, read_record_text
-from ppo_torchrl.report import read_metrics
+from ppo_torchrl.report import read_metrics, write_png
 
 SWING_S = 0.5  # the trot's longest swing while moving
 SHARE = (0.35, 0.65)  # each foot's share on the ground
@@ -131,7 +131,7 @@ def curves(seed_dirs, out: Path) -> None:
             ax.axvline(end, color="grey", linestyle=":", linewidth=1)
         ax.grid(alpha=0.3)
         ax.legend(loc="best")
-    fig.savefig(out, dpi=80)
+    write_png(fig, out, 80)
     plt.close(fig)
 
 

@@ -12,6 +12,8 @@ from pathlib import Path
 
 import yaml
 
+from ppo_torchrl.report import write_png
+
 
 def rows(study_dir: Path) -> list:
     found = []
@@ -63,8 +65,7 @@ def plot(found: list, expected_seeds: int, png: Path) -> None:
            title=f"{found[0]['dir'].parent.parent.name}: every trial, ranked as in the table")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc="best")
-    png.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(png, dpi=90)
+    write_png(fig, png, 90)
     plt.close(fig)
 
 

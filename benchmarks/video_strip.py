@@ -36,7 +36,8 @@ def video_strip(video: Path, out: Path, frames: int = 6, width: int = 240, rate:
         draw.text((6, 4), label, fill=(255, 255, 255), font=font)
         tiles.append(np.asarray(tile))
     path = out / f"{video.stem}_strip.png"
-    Image.fromarray(np.concatenate(tiles, axis=1)).save(path, optimize=True)
+    strip = Image.fromarray(np.concatenate(tiles, axis=1))  # 256 colours, dithered: ~half the bytes, same to the eye
+    strip.quantize(256, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.FLOYDSTEINBERG).save(path, optimize=True)
     return path
 
 

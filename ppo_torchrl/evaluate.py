@@ -406,6 +406,8 @@ def height_sweep(cfg, ac, obs_stats, heights: list[float], episodes: int, seed: 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from ppo_torchrl.report import write_png
+
     fig, ax = plt.subplots(figsize=(5.5, 3.8))
     x = [r["step_height_m"] * 100 for r in rows]
     ax.plot(x, [r["success_rate"] * 100 for r in rows], "o-", label="cross and not terminated (success)")
@@ -415,7 +417,7 @@ def height_sweep(cfg, ac, obs_stats, heights: list[float], episodes: int, seed: 
     ax.set_title(title, fontsize=8)
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    atomic_write_bytes(out_dir / SWEEP_FILES[1], lambda f: fig.savefig(f, format="png", dpi=120), owner)
+    write_png(fig, out_dir / SWEEP_FILES[1], 120, owner)
     plt.close(fig)
     print(f"per episode: {out_dir / SWEEP_FILES[2]}; every figure: {out_dir / SWEEP_FILES[3]}")
     return rows

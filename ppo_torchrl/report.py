@@ -11,6 +11,9 @@ A sweep (multirun) dir gets sweep_report.png (train return against frames, mean 
 over seeds, one curve per group of runs sharing their overrides minus `seed`) and
 sweep_report.md / .csv (final return mean +- std, seeds, frames, SPS). Failed or partial runs are
 left out with a line saying which.
+
+Every figure is written as a 256-colour PNG (`write_png`): a plot's anti-aliased lines and fills need no more, and the
+file is ~40% of matplotlib's RGBA one (results/ keeps its plots within a 40 MiB tree).
 """
 
 from __future__ import annotations
@@ -146,13 +149,25 @@ def run_figure(run_dir: Path):
     return fig
 
 
+def write_png(fig, path: Path, dpi: int, owner: Path | None = None) -> None:
+    """fig as a 256-colour PNG at path (atomic; listed in owner's manifest when given). Medians-cut, no dither: a plot's colours
+    are a few flat ones and their anti-aliased blends, which 256 keep to the eye."""
+    from PIL import Image
+
+    rgba = io.BytesIO()
+    fig.savefig(rgba, format="png", dpi=dpi)
+    rgba.seek(0)
+    image = Image.open(rgba).convert("RGB").quantize(256, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE)
+    atomic_write_bytes(path, lambda f: image.save(f, format="png", optimize=True), owner=owner)
+
+
 def plot_run(run_dir: Path) -> Path:
     """<run dir>/report.png."""
     import matplotlib.pyplot as plt
 
     fig = run_figure(run_dir)
     out = Path(run_dir) / "report.png"
-    atomic_write_bytes(out, lambda f: fig.savefig(f, format="png", dpi=90), owner=run_dir)
+    write_png(fig, out, 90, run_dir)
     plt.close(fig)
     return out
 
@@ -238,7 +253,7 @@ def plot_sweep(sweep_dir: Path) -> List[Path]:
     ax.grid(alpha=0.3)
     ax.legend(loc="best", fontsize=8)
     png = Path(sweep_dir) / "sweep_report.png"
-    atomic_write_bytes(png, lambda f: fig.savefig(f, format="png", dpi=90), owner=sweep_dir)
+    write_png(fig, png, 90, sweep_dir)
     plt.close(fig)
 
     csv_path = Path(sweep_dir) / "sweep_report.csv"

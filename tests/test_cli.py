@@ -100,7 +100,9 @@ def test_a_run_ends_with_one_summary_line_and_commands_that_work_when_pasted(tmp
     assert shlex.split(resume) == [python, "-m", "ppo_torchrl", f"resume={run}", "collector.total_frames=1024"]
     pasted = subprocess.run(report, shell=True, cwd=tmp_path, capture_output=True, text=True, timeout=300)
     assert pasted.returncode == 0, pasted.stderr[-2000:]
-    assert (tmp_path / run / "report.png").is_file()
+    from PIL import Image
+
+    assert Image.open(tmp_path / run / "report.png").mode == "P"  # 256 colours: a plot's bytes kept small (report.py)
     assert not (tmp_path / run / "__main__.log").exists()  # no empty log file in the run dir
 
     # run=latest: the newest run dir under ./outputs, said on stderr
