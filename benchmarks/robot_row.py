@@ -107,8 +107,9 @@ CURVES = (("train/return_last100", "train return, mean of the last 100 episodes"
           ("env/terrain_level", "curriculum: the step's top height (m)"))
 
 
-def curves(seed_dirs, out: Path) -> None:
-    """One panel per CURVES key, one line per seed: stage 1, then stage 2 from the frame stage 1 ended on."""
+def curves(seed_dirs, out: Path, panels=CURVES) -> None:
+    """One panel per (metrics key, title) of `panels`, one line per seed dir: stage 1, then stage 2 from the frame
+    stage 1 ended on."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -121,11 +122,11 @@ def curves(seed_dirs, out: Path) -> None:
         starts = np.cumsum([0.0] + [m["frames"][-1] for m in stages[:-1]])
         stage_ends.update(starts[1:])
         x = np.concatenate([start + np.asarray(m["frames"]) for start, m in zip(starts, stages)])
-        for ax, (key, title) in zip(axes.flat, CURVES):
+        for ax, (key, title) in zip(axes.flat, panels):
             y = np.concatenate([m.get(key, [np.nan] * len(m["frames"])) for m in stages])
             keep = ~np.isnan(y)
             ax.plot(x[keep], y[keep], marker="o" if keep.sum() < 50 else None, markersize=3, label=d.name)
-            ax.set(title=title, xlabel="frames (both stages)")
+            ax.set(title=title, xlabel="frames (both stages)" if stage_ends else "frames")
     for ax in axes.flat:
         for end in stage_ends:
             ax.axvline(end, color="grey", linestyle=":", linewidth=1)

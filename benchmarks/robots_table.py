@@ -14,6 +14,8 @@ each foot on the ground 35-65% of the time, no foot up > 0.5 s while moving, str
 --goals 59 (issue 59's, one row per run dir, named by it): 0.25 l >= 90% on every robot; a foot up > 0.5 s while
 moving in <= 10% of episodes; drives at their torque limit <= 25% of the time; and, where the run dir has them, the
 success at 0.25 l with the grip halved (sweep_grip_half/) and the trunk 10% heavier (sweep_trunk_heavier/), no goal.
+--curves <png>: each run's training curves (metrics.csv or its .xz): the train return, the in-training eval's success
+at 0.25 l, the curriculum's step and the policy's std.
 """
 
 import argparse
@@ -22,7 +24,7 @@ import sys
 from pathlib import Path
 
 from omegaconf import OmegaConf
-from robot_row import SHARE, STRIDE_HZ, SWING_S, load, long_swings
+from robot_row import CURVES, SHARE, STRIDE_HZ, SWING_S, curves, load, long_swings
 
 from ppo_torchrl.envs import resolve_model_file
 from ppo_torchrl.robots.model import GRAVITY, read_robot
@@ -31,6 +33,7 @@ FLAT_GOAL, SPEED_GOAL, STEP = 0.95, 0.25, 0.25  # flat success, flat speed in sq
 TUNING_GOAL = {"go1": 0.9, "anymal_b": 0.9}
 ISSUE59 = {"step": 0.9, "long_swing_episodes": 0.10, "torque_at_limit": 0.25}
 WORLDS = (("grip halved", "sweep_grip_half"), ("trunk +10%", "sweep_trunk_heavier"))
+PANELS = (CURVES[0], CURVES[2], CURVES[3], ("policy/scale_mean", "the policy's std (mean over joints)"))  # --curves
 
 
 def robot_of(run_dir: Path):
@@ -112,12 +115,18 @@ def main() -> None:
     parser.add_argument("--goal", nargs="*", default=[], help="<robot>=<share at 0.25 l>, e.g. go1=0.9")
     parser.add_argument("--goals", type=int, choices=(46, 59), default=46, help="whose goals: issue 46's or 59's")
     parser.add_argument("--out", type=Path)
+    parser.add_argument("--curves", type=Path, help="write each run's training curves here (PNG, one line per run)")
     args = parser.parse_args()
+    if args.curves:
+        curves([Path(r.partition(":")[0]) for r in args.robots], args.curves, PANELS)
     goals = {k: float(v) for k, _, v in (g.partition("=") for g in args.goal)}
     entries = []
     for given in args.robots:
         run, _, sweep = given.partition(":")
         run = Path(run)
+        if not (Path(sweep) if sweep else run / args.sweep).is_dir():
+            print(f"{run}: no sweep yet, left out (make robot sweeps a run when it ends)", file=sys.stderr)
+            continue
         robot = robot_of(run)
         worlds = [load(run / folder, ".") if (run / folder).is_dir() else None for _, folder in WORLDS]
         entries.append((run.name if args.goals == 59 else robot.name, robot,

@@ -1,0 +1,95 @@
+"""Which gait does a legged run's policy use, and do its foot contacts read right? For each run dir, on flat ground,
+deterministic episodes of its checkpoint through the Python API (`ppo_torchrl.load`, normalization frozen) on its
+eval env, read after every control step as the sweeps read them:
+- the share of steps with 0, 1, 2, 3 and 4 feet down, and with each foot pattern that names a gait: both diagonal
+  feet of one pair down and the other pair up (a trot), both feet of one side (a pace), both fore or both hind (a
+  bound); 0 feet down is flight, 4 a pronk's stance;
+- the share of steps each kind of robot geom touches the ground: the feet, the other geoms of the feet's bodies
+  (a shank capsule) and the geoms of the other bodies (a thigh, the trunk): where a non-foot geom carries the robot,
+  the feet's share of time down understates its stance;
+- the trunk's height (min, mean, max) in leg lengths l;
+- each foot's share of steps down, and its body's (the foot or another geom of the foot's body, such as the shank
+  capsule): where the body's share is well above the foot's, the leg stands on its shank, not its foot.
+
+    .venv/bin/python benchmarks/gait_check.py <run dir> [...] [--seed 60] [--episodes 10] [--out <table.md>]
+
+Episode seeds are `seed*1000 + i` as in `evaluate seed=` (60 -> 60000-60009, a sweep's first ten).
+"""
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+import ppo_torchrl
+from ppo_torchrl.envs import episode_seeds, make_gym_env
+from ppo_torchrl.robots.gait import CORNERS, FOOT_PAIRS
+
+PATTERNS = {"trot": "diagonal", "pace": "same_side", "bound": "same_end"}  # one pair down, the other pair up
+
+
+def check(run: Path, seed: int, episodes: int) -> dict:
+    policy = ppo_torchrl.load(run, checkpoint="last")
+    env_cfg = policy.config.env
+    env_cfg.terrain.step_height = 0.0
+    env = make_gym_env(env_cfg, evaluation=True)
+    robot = env.unwrapped
+    corners = robot.foot_corners or list(CORNERS)
+    pairs = {gait: [[corners.index(c) for c in pair] for pair in FOOT_PAIRS[kind]] for gait, kind in PATTERNS.items()}
+    foot_body = robot.model.geom_bodyid[robot.feet]
+    down, body_down, touching, heights = [], [], {"feet": 0, "foot bodies' other geoms": 0, "other bodies": 0}, []
+    for s in episode_seeds(seed, episodes):
+        observation, _ = env.reset(seed=s)
+        while True:
+            observation, _, terminated, truncated, _ = env.step(policy.predict(observation))
+            down.append(robot.feet_on_ground().copy())
+            partners = robot._ground_partners()
+            kinds = {robot._kinds[g] for g in partners.tolist()}  # robots/contacts.py's kinds
+            body_down.append(np.isin(foot_body, robot.model.geom_bodyid[partners]))
+            for kind, name in ((2, "feet"), (0, "foot bodies' other geoms"), (3, "other bodies")):
+                touching[name] += kind in kinds
+            heights.append(float(robot.data.xpos[robot._body_id][2]))
+            if terminated or truncated:
+                break
+    env.close()
+    down = np.array(down)
+    n = len(down)
+    row = {"run": run.name, "steps": n, "feet": " ".join(corners)}
+    row.update({f"{k} down": float(np.mean(down.sum(1) == k)) for k in range(5)})
+    for gait, (a, b) in pairs.items():
+        one = down[:, a].all(1) & ~down[:, b].any(1)
+        other = down[:, b].all(1) & ~down[:, a].any(1)
+        row[gait] = float(np.mean(one | other))
+    row.update({f"touching: {k}": v / n for k, v in touching.items()})
+    l = robot._robot.leg_length
+    row["trunk height / l (min mean max)"] = " ".join(f"{h / l:.2f}" for h in (min(heights), np.mean(heights),
+                                                                               max(heights)))
+    row["each foot down"] = " ".join(f"{x:.2f}" for x in down.mean(0))
+    row["each foot's body down"] = " ".join(f"{x:.2f}" for x in np.mean(body_down, 0))
+    return row
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("runs", nargs="+", type=Path)
+    parser.add_argument("--seed", type=int, default=60)
+    parser.add_argument("--episodes", type=int, default=10)
+    parser.add_argument("--out", type=Path, default=None)
+    args = parser.parse_args()
+    rows = [check(run, args.seed, args.episodes) for run in args.runs]
+    columns = list(rows[0])
+    lines = [f"Gait check: `python benchmarks/gait_check.py {' '.join(str(r) for r in args.runs)} --seed {args.seed} "
+             f"--episodes {args.episodes}`; flat ground, deterministic, episode seeds {args.seed * 1000}-"
+             f"{args.seed * 1000 + args.episodes - 1}; shares of control steps.", "",
+             "| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+    lines += ["| " + " | ".join(f"{r[c]:.2f}" if isinstance(r[c], float) else str(r[c]) for c in columns) + " |"
+              for r in rows]
+    text = "\n".join(lines) + "\n"
+    print(text, end="")
+    if args.out:
+        args.out.write_text(text)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
