@@ -37,7 +37,8 @@ PANELS = (CURVES[0], CURVES[2], CURVES[3], ("policy/scale_mean", "the policy's s
 
 
 def robot_of(run_dir: Path):
-    cfg = OmegaConf.load(run_dir / ".hydra" / "config.yaml")
+    saved = run_dir / ".hydra" / "config.yaml"  # a tuning record keeps the run's config.yaml only
+    cfg = OmegaConf.load(saved if saved.is_file() else run_dir / "config.yaml")
     return read_robot(resolve_model_file(cfg.env.xml_file), cfg.env.legged.keyframe)
 
 
