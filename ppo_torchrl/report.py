@@ -150,8 +150,8 @@ def run_figure(run_dir: Path):
 
 
 def write_png(fig, path: Path, dpi: int, owner: Path | None = None) -> None:
-    """fig as a 256-colour PNG at path (atomic; listed in owner's manifest when given). Medians-cut, no dither: a plot's colours
-    are a few flat ones and their anti-aliased blends, which 256 keep to the eye."""
+    """fig as a 256-colour PNG at path (atomic; listed in owner's manifest when given). Median cut, no dither: a
+    plot's colours are a few flat ones and their anti-aliased blends, which 256 keep to the eye."""
     from PIL import Image
 
     rgba = io.BytesIO()
