@@ -31,6 +31,7 @@ That value is inside checkpoints too, so `unpack` reads it with safe_pickle's re
 from __future__ import annotations
 
 import pickle
+from contextlib import contextmanager
 from typing import Dict, List, Optional
 
 import numpy as np
@@ -85,6 +86,14 @@ class EnvState(Transform):
         if self._before_reset is not None and not norm.frozen:
             norm.stats.load_state_dict(self._before_reset)
         self._before_reset = norm.stats.state_dict()
+
+    @contextmanager
+    def uncounted(self):
+        """Resets inside it (TorchRL's Collector resets its env once when built, which the fast collector's rollout
+        does not use) leave the observation statistics as they were: no policy acts on them."""
+        before = self.obs_norm.state_dict()
+        yield
+        self.obs_norm.load_state_dict(before)
 
     def take_replay(self) -> Optional[np.ndarray]:
         """The rows a full reset gives back once (continue_episodes(now=False)), else None."""

@@ -36,11 +36,10 @@ class FastCollector(Collector):
         env = create_env_fn if isinstance(create_env_fn, EnvBase) else create_env_fn(**(kwargs.pop("create_env_kwargs", None) or {}))
         self.env_state = env_state_of(env)  # TypeError for an env not of envs.make_torchrl_env
         self.obs_norm, self.reward_norm = self.env_state.obs_norm, self.env_state.reward_norm
-        before = self.obs_norm.state_dict()
-        super().__init__(env, policy, frames_per_batch=frames_per_batch, **kwargs)
         # TorchRL's Collector resets the env once (its carrier), which this rollout does not use: the
         # statistics count each env's first observation when the first rollout acts on it.
-        self.obs_norm.load_state_dict(before)
+        with self.env_state.uncounted():
+            super().__init__(env, policy, frames_per_batch=frames_per_batch, **kwargs)
         self.num_envs = len(self.env_state.gym_envs)
         self.steps = frames_per_batch // self.num_envs
         self.numpy_policy = NumpyPolicy.from_actor(self.policy)
