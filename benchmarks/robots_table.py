@@ -14,6 +14,10 @@ each foot on the ground 35-65% of the time, no foot up > 0.5 s while moving, str
 --goals 59 (issue 59's, one row per run dir, named by it): 0.25 l >= 90% on every robot; a foot up > 0.5 s while
 moving in <= 10% of episodes; drives at their torque limit <= 25% of the time; and, where the run dir has them, the
 success at 0.25 l with the grip halved (sweep_grip_half/) and the trunk 10% heavier (sweep_trunk_heavier/), no goal.
+--goals 59 adds a third table: the 0.25 l episodes that did not succeed, by how they ended (a geom on the ground or
+the step, a fall, short of the line at the time limit, or across and then ended), and the curriculum's top step
+(metrics.csv's env/terrain_level): the frame it first reached 0.25 l and where it was at the end, in l. What a
+missed 0.25 l goal is made of.
 --curves <png>: each run's training curves (metrics.csv or its .xz): the train return, the in-training eval's success
 at 0.25 l, the curriculum's step and the policy's std.
 """
@@ -27,6 +31,8 @@ from omegaconf import OmegaConf
 from robot_row import CURVES, SHARE, STRIDE_HZ, SWING_S, curves, load, long_swings
 
 from ppo_torchrl.envs import resolve_model_file
+from ppo_torchrl.records import has_record
+from ppo_torchrl.report import read_metrics
 from ppo_torchrl.robots.model import GRAVITY, read_robot
 
 FLAT_GOAL, SPEED_GOAL, STEP = 0.95, 0.25, 0.25  # flat success, flat speed in sqrt(g l), the step in l
@@ -52,6 +58,29 @@ def by_corner(robot, values) -> str:
     return " ".join(f"{values[i]:.2f}" for i in order)
 
 
+def misses(step: dict) -> str:
+    """The 0.25 l episodes that did not succeed, by how they ended (issue 31's success: crossed, not terminated)."""
+    ends = {}
+    for o in step["outcomes"]:
+        if not o["success"]:
+            end = ("across, then " + (o["termination"] or "ended") if o["crossed"]
+                   else o["termination"] or "short at the time limit")
+            ends[end] = ends.get(end, 0) + 1
+    return ", ".join(f"{k} {v}" for k, v in sorted(ends.items(), key=lambda kv: -kv[1])) or "none"
+
+
+def curriculum(run_dir: Path, l: float) -> str:
+    """When the curriculum's top step first reached 0.25 l, and where it was at the end of training, in l
+    (metrics.csv's env/terrain_level)."""
+    path = run_dir / "metrics.csv"
+    m = read_metrics(path) if has_record(path) else {}
+    seen = [(f, x) for f, x in zip(m.get("frames", []), m.get("env/terrain_level", [])) if x == x]
+    if not seen:
+        return "- | -"
+    first = next((f for f, x in seen if x / l >= STEP - 1e-9), None)
+    return f"{'never' if first is None else f'{first / 1e6:.1f}M'} | {seen[-1][1] / l:.2f} l"
+
+
 def rows(entries: list, goals: dict, issue: int = 46) -> str:
     head = ("| robot | mass | l | 0.25 l | success per height (100 episodes each unless said) | flat speed "
             "| each foot on the ground LF RF LH RH: flat; 0.25 l | episodes with a foot up > 0.5 s moving: flat; 0.25 l "
@@ -60,7 +89,9 @@ def rows(entries: list, goals: dict, issue: int = 46) -> str:
     if issue == 59:
         out = [head + " 0.25 l: grip halved; trunk +10% |", out[1] + "---|"]
     verdicts = []
-    for name, robot, sweep, worlds in entries:
+    ends = ["", "| run | 0.25 l: the episodes that did not succeed, by how they ended "
+            "| the curriculum's top step: first at 0.25 l (frames) | at the end |", "|---|---|---|---|"]
+    for name, robot, sweep, worlds, run_dir in entries:
         l = robot.leg_length
         heights = in_legs(sweep, l)
         flat, step = heights.get(0.0), heights.get(STEP)
@@ -102,10 +133,14 @@ def rows(entries: list, goals: dict, issue: int = 46) -> str:
             checks.append((f"drives at their limit <= {ISSUE59['torque_at_limit']:.0%} of the time",
                            at_limit <= ISSUE59["torque_at_limit"], f"{at_limit:.0%}"))
         verdicts.append((name, checks))
+        if step is not None:
+            ends.append(f"| {name} | {misses(step)} | {curriculum(run_dir, l)} |")
     out += ["", "| goal | " + " | ".join(name for name, _ in verdicts) + " |", "|---|" + "---|" * len(verdicts)]
     for i, (goal, _, _) in enumerate(verdicts[0][1]):
         cells = [f"{'met' if checks[i][1] else 'missed'} ({checks[i][2]})" for _, checks in verdicts]
         out.append(f"| {goal} | " + " | ".join(cells) + " |")
+    if issue == 59:
+        out += ends
     return "\n".join(out) + "\n"
 
 
@@ -131,7 +166,7 @@ def main() -> None:
         robot = robot_of(run)
         worlds = [load(run / folder, ".") if (run / folder).is_dir() else None for _, folder in WORLDS]
         entries.append((run.name if args.goals == 59 else robot.name, robot,
-                        load(Path(sweep) if sweep else run / args.sweep, "."), worlds))
+                        load(Path(sweep) if sweep else run / args.sweep, "."), worlds, run))
     text = rows(entries, goals, args.goals)
     if args.out:
         args.out.write_text(text)
