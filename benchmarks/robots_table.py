@@ -25,6 +25,7 @@ at 0.25 l, the curriculum's step and the policy's std.
 import argparse
 import math
 import sys
+from collections import Counter
 from pathlib import Path
 
 from omegaconf import OmegaConf
@@ -60,13 +61,9 @@ def by_corner(robot, values) -> str:
 
 def misses(step: dict) -> str:
     """The 0.25 l episodes that did not succeed, by how they ended (issue 31's success: crossed, not terminated)."""
-    ends = {}
-    for o in step["outcomes"]:
-        if not o["success"]:
-            end = ("across, then " + (o["termination"] or "ended") if o["crossed"]
-                   else o["termination"] or "short at the time limit")
-            ends[end] = ends.get(end, 0) + 1
-    return ", ".join(f"{k} {v}" for k, v in sorted(ends.items(), key=lambda kv: -kv[1])) or "none"
+    ends = Counter(("across, then " + (o["termination"] or "ended")) if o["crossed"]
+                   else o["termination"] or "short at the time limit" for o in step["outcomes"] if not o["success"])
+    return ", ".join(f"{end} {n}" for end, n in ends.most_common()) or "none"
 
 
 def curriculum(run_dir: Path, l: float) -> str:
@@ -74,7 +71,7 @@ def curriculum(run_dir: Path, l: float) -> str:
     (metrics.csv's env/terrain_level)."""
     path = run_dir / "metrics.csv"
     m = read_metrics(path) if has_record(path) else {}
-    seen = [(f, x) for f, x in zip(m.get("frames", []), m.get("env/terrain_level", [])) if x == x]
+    seen = [(f, x) for f, x in zip(m.get("frames", []), m.get("env/terrain_level", [])) if not math.isnan(x)]
     if not seen:
         return "- | -"
     first = next((f for f, x in seen if x / l >= STEP - 1e-9), None)
