@@ -43,9 +43,9 @@ def check(run: Path, seed: int, episodes: int) -> dict:
         observation, _ = env.reset(seed=s)
         while True:
             observation, _, terminated, truncated, _ = env.step(policy.predict(observation))
-            partners = robot._ground_partners()  # one reading of the contacts per step, as feet_on_ground's
+            partners, kinds = robot.ground_contacts()  # one reading of the contacts per step, as feet_on_ground's
             down.append(np.isin(robot.feet, partners))
-            kinds = {robot._kinds[g] for g in partners.tolist()}  # robots/contacts.py's kinds
+            kinds = set(kinds.tolist())
             body_down.append(np.isin(foot_body, robot.model.geom_bodyid[partners]))
             for kind, name in ((2, "feet"), (0, "foot bodies' other geoms"), (3, "other bodies")):
                 touching[name] += kind in kinds

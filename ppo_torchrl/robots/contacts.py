@@ -98,6 +98,12 @@ class FootContacts:
         return np.array([b if kinds[a] == 1 else a for a, b in self.data.contact.geom.tolist()
                          if kinds[a] == 1 or kinds[b] == 1], np.int64)
 
+    def ground_contacts(self) -> tuple:
+        """(the geoms touching the ground or the step, each one's kind: 2 a foot, 0 another geom of a foot's body,
+        3 a geom of a body that holds no foot), as the simulator stands now: one reading, for a gait's diagnosis."""
+        partners = self._ground_partners()
+        return partners, self._kind[partners]
+
     def _read_contacts(self) -> tuple:
         """(the geoms touching the ground or the step, a ground-contact flag per foot, the number of
         geoms of non-foot bodies among them), as the simulator stands now."""
