@@ -93,6 +93,9 @@ class LocomotionConfig:
     # each control step (a trot's swing lasts about half its period; a foot held up is not a trot). 0: off.
     long_swing_cost_weight: float = 0.0
     long_swing_limit: float = 0.5
+    # A stumble: - w x the share of feet touching the ground or the step on a face more than 45 degrees from level
+    # (the step's riser, its edge met low; legged_gym's feet_stumble from the contact's normal). 0: off.
+    stumble_cost_weight: float = 0.0
     # A world that is not the one trained on (evaluate's robustness figures, issue 59): every contact's friction
     # (each geom's, the feet's and the floor's: MuJoCo takes the larger of a pair) and the main body's mass and
     # inertia, each x this.
@@ -183,6 +186,7 @@ class LeggedConfig:
     gait_clock_weight: float = 0.5
     long_swing_cost_weight: float = 0.0  # - w x the share of feet in the air longer than long_swing_limit
     long_swing_limit: float = 2.0  # x sqrt(l / g): 0.75 of the trot clock's period (0.42 s for a Go1, 0.49 s ANYmal B)
+    stumble_cost_weight: float = 0.0  # - w x the share of feet on an upright face (the step's riser): dimensionless
     torque_cost_weight: float = 0.42  # x sum (torque / (m g l))^2
     friction_scale: float = 1.0  # x every contact's friction: the grip (the robustness figure: 0.5)
     trunk_mass_scale: float = 1.0  # x the trunk's mass and inertia (the robustness figure: 1.1)

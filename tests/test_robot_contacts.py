@@ -222,6 +222,38 @@ def test_a_swing_held_past_its_limit_costs_in_proportion_to_the_feet_held():
     assert "reward_long_swing" not in plain.step(np.zeros(env.action_space.shape))[4]
 
 
+def test_a_foot_against_the_steps_riser_is_a_stumble_and_a_foot_on_its_top_is_not():
+    """Recipe v3's candidate C3: env.legged.stumble_cost_weight x the share of feet touching the ground or the step on a
+    face more than 45 degrees from level. A Go1 pushed 5 mm into the step's riser pays for the fore feet that touch it;
+    standing on the floor, or with a fore foot on the step's top, it pays nothing; the lever off, no such term."""
+    env = go1("env.legged.stumble_cost_weight=2.0").unwrapped
+    env.reset(seed=0)
+    env._place_step(0.1, 1.0)
+    for _ in range(10):  # settle onto the floor
+        env.step(np.zeros(env.action_space.shape))
+    assert not env.feet_on_a_face().any() and env.feet_on_ground().sum() >= 2
+    feet, radius = env.data.geom_xpos[env.feet], env.model.geom_size[env.feet, 0]
+    env.data.qpos[0] += env.step_edge - (feet[:, 0] + radius).max() + 0.005
+    mujoco.mj_forward(env.model, env.data)
+    stumbling = env.feet_on_a_face()
+    assert stumbling.any() and {env.foot_corners[i] for i in np.flatnonzero(stumbling)} <= {"LF", "RF"}
+    _, terms = env._legged_terms(np.zeros(env.action_space.shape))
+    assert terms["reward_stumble"] == pytest.approx(-2.0 * np.count_nonzero(stumbling) / 4)
+
+    env.reset(seed=0)
+    mujoco.mj_forward(env.model, env.data)
+    feet = env.data.geom_xpos[env.feet]
+    fore = [i for i, corner in enumerate(env.foot_corners) if corner.endswith("F")]
+    env._place_step((feet[fore, 2] - radius[fore]).min() + 0.004, feet[fore, 0].min() - env._start_along - 0.05)
+    mujoco.mj_forward(env.model, env.data)
+    partners, kinds = env.ground_contacts()
+    on_top = [g for g in partners[kinds == 2] if env.data.geom_xpos[g, 0] > env.step_edge]
+    assert on_top and not env.feet_on_a_face().any()
+    plain = go1().unwrapped  # recipe v2: the lever off
+    plain.reset(seed=0)
+    assert "reward_stumble" not in plain.step(np.zeros(plain.action_space.shape))[4]
+
+
 def test_the_eval_step_a_video_films_is_the_sweeps_step_to_the_micrometre():
     """Issue 59 item 7: evaluate's default step (what video=true films) and heights=0.25l's step are one number."""
     from ppo_torchrl.compose import compose

@@ -10,6 +10,7 @@ millimetre into the ground).
 
 from __future__ import annotations
 
+import math
 from typing import Optional
 
 import mujoco
@@ -17,6 +18,10 @@ import numpy as np
 
 from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.robots.gait import CORNERS
+
+# A foot's contact whose normal is more than 45 degrees from the vertical meets a face nearer upright than level: the
+# step's riser, or its edge met low (a stumble: legged_gym's feet_stumble, read from the contact's geometry, not a force)
+FACE_NORMAL_Z = math.cos(math.radians(45.0))
 
 
 class FootContacts:
@@ -103,6 +108,16 @@ class FootContacts:
         3 a geom of a body that holds no foot), as the simulator stands now: one reading, for a gait's diagnosis."""
         partners = self._ground_partners()
         return partners, self._kind[partners]
+
+    def feet_on_a_face(self) -> np.ndarray:
+        """A flag per foot (in `foot_names` order) touching the ground or the step on a face nearer upright than level
+        (FACE_NORMAL_Z), as the simulator stands now."""
+        flags, kinds, contact = np.zeros(len(self.feet), bool), self._kinds, self.data.contact
+        for (a, b), normal_z in zip(contact.geom.tolist(), contact.frame[:, 2].tolist()):
+            foot = b if kinds[a] == 1 else a if kinds[b] == 1 else None
+            if foot is not None and kinds[foot] == 2 and abs(normal_z) < FACE_NORMAL_Z:
+                flags[self._foot_of[foot]] = True
+        return flags
 
     def _read_contacts(self) -> tuple:
         """(the geoms touching the ground or the step, a ground-contact flag per foot, the number of

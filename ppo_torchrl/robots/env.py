@@ -71,7 +71,7 @@ LEGGED_KEYS = ("heading", "target_speed", "torque_limit", "joint_speed_limit", "
                "orientation_cost_weight", "body_contact_cost_weight", "feet_air_time_weight", "feet_air_time_target",
                "foot_geoms", "only_positive_rewards", "terminate_on_contact", "healthy_z_above_terrain",
                "gait_period", "gait_clock_weight", "long_swing_cost_weight", "long_swing_limit", "contacts", "physics_dt",
-               "friction_scale", "trunk_mass_scale")
+               "friction_scale", "trunk_mass_scale", "stumble_cost_weight")
 
 
 def register() -> None:

@@ -30,6 +30,7 @@ DERIVED = {
                    "forward_reward_weight": "forward_reward_weight", "healthy_z_range": "fall_height",
                    "gait_period": "gait_period", "gait_clock_weight": "gait_clock_weight",
                    "long_swing_cost_weight": "long_swing_cost_weight", "long_swing_limit": "long_swing_limit",
+                   "stumble_cost_weight": "stumble_cost_weight",
                    "torque_cost_weight": "torque_cost_weight", "joint_speed_cost_weight": "joint_speed_cost_weight",
                    "foot_slip_cost_weight": "foot_slip_cost_weight", "base_height_target": None,
                    "base_height_cost_weight": "base_height_cost_weight", "terminate_on_contact": None,
@@ -96,6 +97,7 @@ def derived_values(robot: Robot, legged) -> dict:
             "gait_clock_weight": legged.gait_clock_weight if legged.gait_period is not None else 0.0,
             "long_swing_cost_weight": legged.get("long_swing_cost_weight", 0.0),
             "long_swing_limit": legged.get("long_swing_limit", 2.0) * time,
+            "stumble_cost_weight": legged.get("stumble_cost_weight", 0.0),
             "torque_cost_weight": legged.torque_cost_weight / weight_moment ** 2,
             "joint_speed_cost_weight": legged.joint_speed_cost_weight * time ** 2,
             "foot_slip_cost_weight": legged.foot_slip_cost_weight / speed ** 2,
@@ -162,7 +164,7 @@ def legged_checks(legged) -> list:
     checks = [(legged[k] > 0, f"env.legged.{k}={legged[k]} must be > 0") for k in positive]
     checks += [(legged[k] >= 0, f"env.legged.{k}={legged[k]} must be >= 0")
                for k in ("forward_reward_weight", "gait_clock_weight", "long_swing_cost_weight", "long_swing_limit",
-                         "torque_cost_weight", "joint_speed_cost_weight",
+                         "stumble_cost_weight", "torque_cost_weight", "joint_speed_cost_weight",
                          "foot_slip_cost_weight", "base_height_cost_weight")]
     contacts, dt = legged.get("contacts", CONTACT_MODES[0]), str(legged.get("physics_dt") or "model")
     checks.append((contacts in CONTACT_MODES, f"env.legged.contacts={contacts} is not known; use "

@@ -2,7 +2,8 @@
 of Ant-v5's forward, healthy, control and contact terms: joint torque, joint speed, joint speed past
 the limit (the largest excess of each joint over the control step's physics steps, so the impacts
 that eval's peak joint speed sees are paid for), action rate, foot slip, base height and
-orientation, feet air time, a swing held past a limit, non-foot contacts, and a trot clock (a periodic reward
+orientation, feet air time, a swing held past a limit, a foot meeting an upright face (a stumble), non-foot
+contacts, and a trot clock (a periodic reward
 for the diagonal pairs' contacts, Siekmann et al. 2021); `target_speed` caps the rewarded forward speed.
 
 `LeggedRewards` is a mixin of `LocomotionEnv` (robots/env.py): it reads the env's weights (`_w`),
@@ -81,6 +82,8 @@ class LeggedRewards:
         if w["orientation_cost_weight"]:
             up = data.xmat[self._body_id].reshape(3, 3)[2] @ self._up0  # cos(tilt from the initial attitude)
             terms["reward_orientation"] = -w["orientation_cost_weight"] * (1.0 - float(up))
+        if w["stumble_cost_weight"]:  # feet against the step's riser or low on its edge (contacts.py, FACE_NORMAL_Z)
+            terms["reward_stumble"] = -w["stumble_cost_weight"] * float(np.count_nonzero(self.feet_on_a_face()) / len(self.feet))
         if self._needs_contacts:
             feet, body_contacts = self._contacts()
             feet_xy = data.geom_xpos[self.feet, :2]
