@@ -49,7 +49,7 @@ def check(run: Path, seed: int, episodes: int) -> dict:
             body_down.append(np.isin(foot_body, robot.model.geom_bodyid[partners]))
             for kind, name in ((2, "feet"), (0, "foot bodies' other geoms"), (3, "other bodies")):
                 touching[name] += kind in kinds
-            heights.append(float(robot.data.xpos[robot._body_id][2]))
+            heights.append(float(robot.get_body_com(robot.robot.trunk)[2]))
             if terminated or truncated:
                 break
     env.close()
@@ -62,7 +62,7 @@ def check(run: Path, seed: int, episodes: int) -> dict:
         other = down[:, b].all(1) & ~down[:, a].any(1)
         row[gait] = float(np.mean(one | other))
     row.update({f"touching: {k}": v / n for k, v in touching.items()})
-    l = robot._robot.leg_length
+    l = robot.robot.leg_length
     row["trunk height / l (min mean max)"] = " ".join(f"{h / l:.2f}" for h in (min(heights), np.mean(heights),
                                                                                max(heights)))
     row["each foot down"] = " ".join(f"{x:.2f}" for x in down.mean(0))

@@ -515,6 +515,11 @@ class LocomotionEnv(StepTerrain, FootContacts, LeggedRewards, AntEnv):
     def gait_summary(self) -> dict:
         return self.gait.summary()
 
+    @property
+    def robot(self) -> Optional[Robot]:
+        """The robot read from its model (robots/model.py: trunk, leg length, mass, feet); None for a model run as
+        it is (env=mjcf)."""
+        return self._robot
 
 
 # ---------------------------------------------------------------- config checks (validation.py calls them)
