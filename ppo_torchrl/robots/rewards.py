@@ -3,8 +3,8 @@ of Ant-v5's forward, healthy, control and contact terms: joint torque, joint spe
 the limit (the largest excess of each joint over the control step's physics steps, so the impacts
 that eval's peak joint speed sees are paid for), action rate, foot slip, base height and
 orientation, feet air time, a swing held past a limit, a foot meeting an upright face (a stumble), non-foot
-contacts, and a trot clock (a periodic reward
-for the diagonal pairs' contacts, Siekmann et al. 2021); `target_speed` caps the rewarded forward speed.
+contacts, and a trot clock (a periodic reward for the diagonal pairs' contacts, Siekmann et al. 2021);
+`target_speed` caps the rewarded forward speed.
 
 `LeggedRewards` is a mixin of `LocomotionEnv` (robots/env.py): it reads the env's weights (`_w`),
 its contacts (robots/contacts.py) and the simulator.
