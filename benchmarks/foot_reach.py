@@ -20,7 +20,7 @@ from ppo_torchrl.envs import make_gym_env
 def main(model_file: str, overrides: list) -> None:
     cfg = compose(["experiment=legged_trot", f"env.xml_file={model_file}", *overrides])
     env = make_gym_env(cfg.env).unwrapped
-    model, data, robot = env.model, mujoco.MjData(env.model), env._robot
+    model, data, robot = env.model, mujoco.MjData(env.model), env.robot
     joints = [int(model.actuator_trnid[a, 0]) for a in range(model.nu)]
     leg_root = model.jnt_bodyid[joints[0]]  # the first leg: the actuators on the first joint's subtree
 

@@ -147,7 +147,7 @@ def main() -> None:
     for scene in scenes:
         env_a, std, label_a = build(scene, BEFORE + args.a)
         env_b, _, label_b = build(scene, args.b)
-        name = env_b.unwrapped._robot.name
+        name = env_b.unwrapped.robot.name
         actions = np.clip(std * np.random.default_rng(0).normal(size=(args.steps, env_a.action_space.shape[0])), -1, 1)
         figures = {"A": [], "B": []}
         contacts = {}

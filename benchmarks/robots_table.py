@@ -130,7 +130,7 @@ def rows(entries: list, goals: dict, issue: int = 46) -> str:
             checks.append((f"drives at their limit <= {ISSUE59['torque_at_limit']:.0%} of the time",
                            at_limit <= ISSUE59["torque_at_limit"], f"{at_limit:.0%}"))
         verdicts.append((name, checks))
-        if step is not None:
+        if issue == 59 and step is not None:  # the third table reads each run's metrics: issue 59's only
             ends.append(f"| {name} | {misses(step)} | {curriculum(run_dir, l)} |")
     out += ["", "| goal | " + " | ".join(name for name, _ in verdicts) + " |", "|---|" + "---|" * len(verdicts)]
     for i, (goal, _, _) in enumerate(verdicts[0][1]):
