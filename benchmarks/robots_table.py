@@ -141,7 +141,7 @@ def rows(entries: list, goals: dict, issue: int = 46) -> str:
     return "\n".join(out) + "\n"
 
 
-def main() -> None:
+def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("robots", nargs="+", help="<robot dir>[:<sweep dir>]")
     parser.add_argument("--sweep", default="sweep", help="the sweep's folder in each robot dir")
@@ -153,21 +153,30 @@ def main() -> None:
     if args.curves:
         curves([Path(r.partition(":")[0]) for r in args.robots], args.curves, PANELS)
     goals = {k: float(v) for k, _, v in (g.partition("=") for g in args.goal)}
-    entries = []
+    entries, left_out = [], []
     for given in args.robots:
         run, _, sweep = given.partition(":")
         run = Path(run)
         if not (Path(sweep) if sweep else run / args.sweep).is_dir():
-            print(f"{run}: no sweep yet, left out (make robot sweeps a run when it ends)", file=sys.stderr)
+            left_out.append(run)
             continue
         robot = robot_of(run)
         worlds = [load(run / folder, ".") if (run / folder).is_dir() else None for _, folder in WORLDS]
         entries.append((run.name if args.goals == 59 else robot.name, robot,
                         load(Path(sweep) if sweep else run / args.sweep, "."), worlds, run))
+    if not entries:  # no table to make: the curves (read from the runs' metrics) were all that could be asked
+        if args.curves:
+            return 0
+        print(f"error: none of the {len(args.robots)} run(s) given has its sweep ({args.sweep}/ or <run>:<sweep dir>)",
+              file=sys.stderr)
+        return 2
+    for run in left_out:
+        print(f"{run}: no sweep yet, left out (make robot sweeps a run when it ends)", file=sys.stderr)
     text = rows(entries, goals, args.goals)
     if args.out:
         args.out.write_text(text)
     print(text, end="")
+    return 0
 
 
 if __name__ == "__main__":
