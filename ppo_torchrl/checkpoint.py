@@ -154,12 +154,11 @@ def load_policy(run_dir: Path, which: str = "best"):
 def check_same_env(run_dir: Path, cfg, checkpoint: str) -> None:
     """A checkpoint of another env is not filed in this run's dir: one ConfigError line (out=<dir> writes it
     elsewhere). The run's env is its config.yaml's; a run without a readable one is not checked."""
-    from omegaconf import OmegaConf
-
+    from ppo_torchrl.config_data import read_config
     from ppo_torchrl.envs import env_label
 
     try:
-        own = OmegaConf.load(Path(run_dir) / "config.yaml").env
+        own = read_config(Path(run_dir) / "config.yaml").env
         own_label = env_label(own)
     except Exception:  # noqa: BLE001 - no config.yaml, or a damaged one: nothing to compare with
         return

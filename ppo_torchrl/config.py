@@ -415,17 +415,18 @@ def run_config(run_dir, state: dict, announce: bool = False):
     import sys
     from pathlib import Path
 
+    from ppo_torchrl.config_data import plain, read_yaml
     from ppo_torchrl.errors import ConfigError
 
     saved = state.get("config")
     if not isinstance(saved, dict):
         raise ConfigError(f"the checkpoint of {run_dir} holds no config; it was not made by ppo_torchrl's trainer")
+    plain(saved, f"the checkpoint of {run_dir}'s config")  # data: an interpolation in it is refused, never resolved
     cfg = OmegaConf.merge(OmegaConf.structured(Config), OmegaConf.create(saved))
     if announce:
         try:
-            on_disk = OmegaConf.to_container(OmegaConf.load(Path(run_dir) / "config.yaml"))
-            same = on_disk == OmegaConf.to_container(OmegaConf.create(saved))
-        except Exception:  # noqa: BLE001 - missing, truncated or not YAML: the checkpoint's config is used
+            same = read_yaml(Path(run_dir) / "config.yaml") == saved
+        except Exception:  # noqa: BLE001 - missing, truncated, not YAML or not data: the checkpoint's config is used
             same = False
         if not same:
             print(f"warning: {Path(run_dir) / 'config.yaml'} is missing, damaged or differs from the checkpoint's "

@@ -348,24 +348,21 @@ def _ctrl_bounds_from_force(env: gym.Env, info: MjcfInfo) -> None:
 
 
 def extra_transforms(env_cfg) -> list:
-    """env.transforms.extra, instantiated: `_target_` entries naming TorchRL `Transform` classes."""
-    from hydra.errors import InstantiationException
-    from hydra.utils import instantiate
+    """env.transforms.extra, built: each entry names one of TorchRL's data transforms, checked before anything is
+    called (config_data.transform_entry: no other class, no nested _target_, arguments plain data)."""
+    from ppo_torchrl.config_data import transform_entry
 
     built = []
     for i, entry in enumerate(env_cfg.transforms.extra or []):
         where = f"env.transforms.extra[{i}]"
-        target = entry.get("_target_") if hasattr(entry, "get") else None
-        if not target:
-            raise ConfigError(f"{where}={entry} needs a _target_ naming a TorchRL transform class, e.g. "
-                              "{_target_: torchrl.envs.CatFrames, N: 3, dim: -1, in_keys: [observation]}")
+        cls, args, kwargs = transform_entry(entry, where)
         try:
-            transform = instantiate(entry)
-        except (InstantiationException, TypeError, ValueError, ImportError) as exc:
-            detail = " ".join(str(exc.__cause__ or exc).split())[:300]
-            raise ConfigError(f"{where} ({target}) cannot be built: {detail}") from None
-        if not isinstance(transform, Transform):
-            raise ConfigError(f"{where} ({target}) is a {type(transform).__name__}, not a TorchRL Transform")
+            transform = cls(*args, **kwargs)
+        except (TypeError, ValueError, KeyError, RuntimeError) as exc:
+            detail = " ".join(str(exc).split())[:300]
+            raise ConfigError(f"{where} ({cls.__name__}) cannot be built: {detail}") from None
+        if not isinstance(transform, Transform):  # the list holds Transform classes: a guard, not a branch
+            raise ConfigError(f"{where} ({cls.__name__}) is a {type(transform).__name__}, not a TorchRL Transform")
         built.append(transform)
     return built
 

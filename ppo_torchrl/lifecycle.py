@@ -276,12 +276,13 @@ def resume_config(run_dir, overrides, state: dict, announce: bool = False):
     on top. A group choice (`logger=csv`) is accepted when it is the run's own (`.hydra/hydra.yaml`), refused
     otherwise."""
     from ppo_torchrl.config import run_config
+    from ppo_torchrl.config_data import read_yaml
 
     cfg = run_config(run_dir, state, announce)
     hydra_file = Path(run_dir) / ".hydra" / "hydra.yaml"
     try:
-        choices = OmegaConf.load(hydra_file).hydra.runtime.choices if hydra_file.is_file() else {}
-    except Exception:  # noqa: BLE001 - a damaged hydra.yaml: group choices cannot be compared, so none is accepted
+        choices = read_yaml(hydra_file, ("hydra", "runtime", "choices")) if hydra_file.is_file() else {}
+    except Exception:  # noqa: BLE001 - a damaged hydra.yaml (or not data): group choices cannot be compared, none is accepted
         choices = {}
     for override in overrides:
         group, _, option = override.partition("=")

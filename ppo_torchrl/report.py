@@ -88,9 +88,9 @@ def episode_kinds(run_dir: Path) -> tuple:
     the step's height, on a curriculum or from a range, while its eval has one fixed step: their returns are not
     comparable): (train words, eval words) for the legend, ("", "") otherwise or without a readable config.yaml."""
     try:
-        from omegaconf import OmegaConf
+        from ppo_torchrl.config_data import read_config
 
-        terrain = OmegaConf.load(Path(run_dir) / "config.yaml").env.get("terrain")
+        terrain = read_config(Path(run_dir) / "config.yaml").env.get("terrain")
         if terrain is None or terrain.get("step_height") is not None or terrain.get("step_height_range") is None:
             return "", ""
         low, high = (float(h) * 100 for h in terrain.step_height_range)
@@ -196,9 +196,13 @@ def sweep_runs(sweep_dir: Path):
         if status != "finished":
             skipped.append(f"skipped {job.name}: status {s.get('status')} at {s.get('frames')} frames")
             continue
-        from omegaconf import OmegaConf
+        from ppo_torchrl.config_data import read_yaml
 
-        args = OmegaConf.load(overrides) if overrides.exists() else []
+        try:  # the overrides as text, only compared (an interpolation in one stays its text)
+            args = read_yaml(overrides, as_text=True) if overrides.exists() else []
+        except Exception:  # noqa: BLE001 - a damaged file: not grouped as any other job
+            skipped.append(f"skipped {job.name}: its .hydra/overrides.yaml cannot be read")
+            continue
         key = tuple(sorted(a for a in args if not a.split("=")[0].lstrip("+~") == "seed"))
         groups.setdefault(key, []).append((job, s))
     return groups, skipped

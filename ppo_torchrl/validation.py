@@ -31,6 +31,7 @@ def validate_config(cfg, keep_env: bool = False, build_env: bool = True):
     the values only, for a sweep's job whose env config an earlier job's check built (returns None)."""
     from ppo_torchrl.advantage import ESTIMATORS
     from ppo_torchrl.collectors import CHOICES, resolve_backend
+    from ppo_torchrl.config_data import transform_entry
     from ppo_torchrl.envs import env_spec
     from ppo_torchrl.eval_worker import BACKGROUND_CHOICES
     from ppo_torchrl.loggers import LOGGERS
@@ -44,6 +45,8 @@ def validate_config(cfg, keep_env: bool = False, build_env: bool = True):
         raise ConfigError(f"{', '.join(missing)} must be given{example}")
     check_keys_against_schema(cfg)
     check_finite(cfg)
+    for i, entry in enumerate(cfg.env.transforms.extra or []):  # what it names, before any env is built
+        transform_entry(entry, f"env.transforms.extra[{i}]")
     c, loss, t, adv, env = cfg.collector, cfg.loss, cfg.env.transforms, cfg.advantage, cfg.env
     compile_choice = str(cfg.compile).lower()
     positive_or_null = lambda v: v is None or v > 0  # noqa: E731

@@ -117,6 +117,9 @@ def test_a_full_disk_or_a_kill_between_a_runs_write_and_its_listing_leaves_a_dir
         "error: a file reached the file size limit writing x.pt; raise the limit (ulimit -f)")
     assert errors.exit_code(OSError(errno.EFBIG, "File too large")) == 1
     monkeypatch.setattr(errors.tempfile, "mkstemp", fails(FileNotFoundError(2, "No usable temporary directory")))
+    from ppo_torchrl.signals import ON_DISK
+
+    monkeypatch.setattr(ON_DISK, "started", False)  # no run of this process (another test's in-process run may be)
     line = errors.message_of(KeyError("a bug"))
     assert line.startswith("error: internal error (KeyError: 'a bug')") and "no log file could be written" in line
 

@@ -55,10 +55,11 @@ def test_catframes_by_config_sizes_the_networks_checkpoints_and_evaluates(tiny_c
 
 
 @pytest.mark.parametrize("entry, expected", [
-    ("[{_target_: torchrl.envs.NoSuchTransform}]", "extra[0] (torchrl.envs.NoSuchTransform) cannot be built"),
+    ("[{_target_: torchrl.envs.NoSuchTransform}]", "extra[0]: _target_=torchrl.envs.NoSuchTransform is not a TorchRL "
+                                                   "transform this app builds"),
     ("[{_target_: torchrl.envs.CatFrames, M: 3}]", "unexpected keyword argument 'M'"),
     ("[{N: 3}]", "needs a _target_"),
-    ("[{_target_: collections.OrderedDict}]", "not a TorchRL Transform"),
+    ("[{_target_: collections.OrderedDict}]", "_target_=collections.OrderedDict is not a TorchRL transform"),
 ])
 def test_a_bad_transform_entry_is_one_line_naming_it(tiny_cfg, tmp_path, entry, expected):
     with pytest.raises(ConfigError, match=expected.replace("[", r"\[").replace("(", r"\(").replace(")", r"\)")):
