@@ -311,6 +311,9 @@ class CollectorConfig:
     # (frames_per_batch / workers from each), the weights go to every worker after each update, and
     # the workers' normalization statistics are merged into one set after each batch.
     workers: int = 1
+    # env=legged (one batched env of num_envs robots): the threads its physics steps on (MuJoCo releases the GIL in
+    # each row's step); 0: one per core, at most one per robot; each worker process of workers > 1 uses one.
+    physics_threads: int = 0
     # null: local processes; ray: TorchRL's RayCollector with `workers` remote collectors
     # (pip install -e ".[ray]"), on a local ray.init() unless ray_address joins a cluster (auto: the
     # one `ray start` runs on this node; or host:port).

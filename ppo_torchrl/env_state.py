@@ -2,7 +2,8 @@
 
 An env of `envs.make_torchrl_env` is `TransformedEnv(GymWrapper(...))`; `EnvState` holds, for the envs under
 it (in env order):
-- the Gymnasium envs themselves (the fast collector steps them; evaluate films `gym_envs[0]`);
+- the env's rows themselves (env_rows.py: one Gymnasium env per row, or one batched env of N rows; the fast
+  collector steps them, evaluate films the first);
 - both normalizers (normalization.py): the observation statistics and the return statistics with each env's
   discounted return so far. The `ObservationNormalization` / `RewardNormalization` transforms later in the
   chain apply them to TorchRL's data; they hold no state of their own;
@@ -41,7 +42,6 @@ from torchrl.data import Composite, Unbounded
 from torchrl.envs.transforms import Transform
 
 from ppo_torchrl.normalization import ObservationNormalizer, RewardNormalizer, pooled
-from ppo_torchrl.positions import ResumableReset
 from ppo_torchrl.safe_pickle import loads as data_loads
 
 EPISODE_KEYS = ("episode_reward", "step_count")
@@ -52,10 +52,9 @@ class EnvState(Transform):
     """The env-side state of the envs under one `TransformedEnv` (module doc); it changes nothing in the data but
     the episode counters it writes."""
 
-    def __init__(self, envs: List[ResumableReset], obs_norm: ObservationNormalizer,
-                 reward_norm: Optional[RewardNormalizer] = None):
+    def __init__(self, rows, obs_norm: ObservationNormalizer, reward_norm: Optional[RewardNormalizer] = None):
         super().__init__(in_keys=[], out_keys=list(EPISODE_KEYS))
-        self.gym_envs = envs
+        self.rows = rows  # env_rows.GymRows or BatchRows
         self.obs_norm, self.reward_norm = obs_norm, reward_norm
         self.held_positions: Optional[dict] = None  # {"envs", "acted_on"} restored, waiting for continue_episodes
         # What each env's policy acts on next, as it saw it: its last normalized observation (a resume gives it back
@@ -105,9 +104,7 @@ class EnvState(Transform):
     # ------------------------------------------------------------------ the episodes, in TorchRL's keys
     def episodes(self) -> tuple:
         """The return and length of each env's episode so far: ([n], [n]) arrays."""
-        records = [env.record for env in self.gym_envs]
-        return (np.array([r.episode_returns for r in records], np.float64),
-                np.array([r.episode_lengths for r in records], np.int64))
+        return self.rows.episodes()
 
     def _write_episodes(self, data: TensorDictBase) -> TensorDictBase:
         shape = self.parent.batch_size + (1,)
@@ -130,14 +127,17 @@ class EnvState(Transform):
 
     # ------------------------------------------------------------------ metrics and positions
     def env_metrics(self) -> List[Dict[str, float]]:
-        """Scalars each env keeps, logged each iteration: a step env's curriculum level and recent success rate
-        (`LocomotionEnv.terrain_metrics`), one dict per env that says something ([] where none does)."""
-        reports = [env.unwrapped.terrain_metrics() for env in self.gym_envs
-                   if hasattr(env.unwrapped, "terrain_metrics")]
-        return [r for r in reports if r]
+        """Scalars each env keeps, logged each iteration: a step env's curriculum level and recent success rate, a
+        task's reward terms' episode sums, one dict per row that says something ([] where none does)."""
+        return self.rows.metrics()
+
+    @property
+    def gym_envs(self) -> list:
+        """The Gymnasium envs of one-env-per-row rows (evaluate films the first; EnvPool reads the id)."""
+        return self.rows.envs
 
     def positions(self) -> list:
-        return [env.position() for env in self.gym_envs]
+        return self.rows.positions()
 
     def continue_episodes(self, now: bool) -> bool:
         """Each env continues the episode of the positions `restore` held: `now` (the fast collector: the
@@ -145,13 +145,12 @@ class EnvState(Transform):
         resets its envs when it starts; that reset gives back the saved normalized observation, uncounted).
         False, changing nothing, when none are held or their count differs."""
         held, self.held_positions = self.held_positions, None
-        if held is None or len(held["envs"]) != len(self.gym_envs):
+        if held is None or len(held["envs"]) != self.rows.n:
             return False
-        for env, position in zip(self.gym_envs, held["envs"]):
-            if now:
-                env.restore(position)
-            else:
-                env.pending = position
+        if now:
+            self.rows.restore(held["envs"])
+        else:
+            self.rows.hold(held["envs"])
         if now:
             self._emitted = held["acted_on"]
         else:

@@ -27,8 +27,9 @@ from ppo_torchrl.normalization import (
     make_observation_normalizer,
     make_reward_normalizer,
 )
+from ppo_torchrl.env_rows import BatchRows, GymRows
 from ppo_torchrl.env_state import EnvState
-from ppo_torchrl.layout import OBS_LAYOUTS, layout_of
+from ppo_torchrl.layout import OBS_LAYOUTS
 from ppo_torchrl.positions import resumable
 
 # Gymnasium's v4 MuJoCo envs warn on every make that v5 exists; the warning is not actionable here.
@@ -370,8 +371,13 @@ def extra_transforms(env_cfg) -> list:
 def env_spec(env_cfg, keep_env: bool = False) -> EnvSpec:
     """The env's sizes and action bounds, read from the env built from `env_cfg`. keep_env: that env stays open in
     the spec (`EnvSpec.env`) for the training env of the same config to step (make_torchrl_env's first_env), so
-    that a run builds its env once before step 1; else it is closed."""
-    env = make_gym_env(env_cfg)
+    that a run builds its env once before step 1; else it is closed. (A batched env is read from one row of its own,
+    which is not kept: a batch is built for its number of rows.)"""
+    if batched(env_cfg):
+        keep_env = False
+    env = make_batch(env_cfg) if batched(env_cfg) else make_gym_env(env_cfg)
+    observation_space = getattr(env, "single_observation_space", env.observation_space)
+    action_space = getattr(env, "single_action_space", env.action_space)
     if env_cfg.transforms.extra:  # the observation the networks see is the transformed one
         torchrl_env = make_torchrl_env(env_cfg, clip_actions=False, gamma=0.99)
         try:
@@ -386,16 +392,54 @@ def env_spec(env_cfg, keep_env: bool = False) -> EnvSpec:
             raise ConfigError(f"env.transforms.extra makes observations of shape {tuple(obs_shape)}; the networks "
                               "need a flat vector (use dim=-1)")
     spec = EnvSpec(
-        obs_dim=int(obs_shape[0]) if env_cfg.transforms.extra else int(env.observation_space.shape[0]),
-        action_dim=int(env.action_space.shape[0]),
-        action_low=env.action_space.low.astype(np.float32),
-        action_high=env.action_space.high.astype(np.float32),
+        obs_dim=int(obs_shape[0]) if env_cfg.transforms.extra else int(observation_space.shape[0]),
+        action_dim=int(action_space.shape[0]),
+        action_low=action_space.low.astype(np.float32),
+        action_high=action_space.high.astype(np.float32),
     )
     if keep_env:
         spec.env = env
     else:
         env.close()
     return spec
+
+
+def batched(env_cfg) -> bool:
+    """env=legged steps its robots as one batched env (tasks/locomotion/batch.py); every other env one Gymnasium env
+    per row."""
+    return env_cfg.get("legged") is not None and bool(env_cfg.get("xml_file"))
+
+
+def make_batch(env_cfg, num_envs: int = 1, evaluation: bool = False, render_mode: Optional[str] = None,
+               threads: Optional[int] = None, **render_kwargs):
+    """The batched legged env of `env_cfg`: `num_envs` robots (LeggedBatchEnv)."""
+    from ppo_torchrl.tasks.locomotion.batch import LeggedBatchEnv
+
+    kwargs = gym_make_kwargs(env_cfg, evaluation=evaluation)
+    kwargs.pop("evaluation", None)
+    return LeggedBatchEnv(kwargs, num_envs=num_envs, evaluation=evaluation, threads=threads,
+                          render_mode=render_mode, **render_kwargs)
+
+
+def make_rows(env_cfg, num_envs: int, train: bool = True, render_mode: Optional[str] = None, first_env=None,
+              threads: Optional[int] = None, **render_kwargs):
+    """The rows of a training or evaluation env (env_rows.py): a batch for env=legged, else Gymnasium envs."""
+    if batched(env_cfg):
+        if first_env is not None:
+            first_env.close()
+        return BatchRows(make_batch(env_cfg, num_envs, not train, render_mode, threads, **render_kwargs))
+    return GymRows([resumable(first_env if i == 0 and first_env is not None else
+                              make_gym_env(env_cfg, render_mode, not train, **render_kwargs)) for i in range(num_envs)])
+
+
+def seed_rows(rows, seed: int) -> None:
+    """Each row i is reset with seed + i once built, so that everything that follows is reproducible."""
+    if isinstance(rows, BatchRows):
+        rows.batch.reset(seed=seed)
+        return
+    for i, env in enumerate(rows.envs):
+        env.reset(seed=seed + i)
+        env.action_space.seed(seed + i)
 
 
 def make_torchrl_env(
@@ -410,6 +454,7 @@ def make_torchrl_env(
     num_envs: int = 1,
     seed: Optional[int] = None,
     first_env=None,
+    threads: Optional[int] = None,
     **render_kwargs,
 ) -> TransformedEnv:
     """`TransformedEnv(GymWrapper(gymnasium env))` with the configured transforms: the card's pipeline,
@@ -423,32 +468,25 @@ def make_torchrl_env(
     whose returns are the ones a user compares.
     seed: each env i is reset with seed + i once built, so that everything that follows is reproducible.
     first_env: a Gymnasium env of `env_cfg` already built (env_spec's, kept by the command's check): env 0.
+    threads: a batched env's physics threads (collector.physics_threads; None or 0: one per core).
     """
     t = env_cfg.transforms
-    gym_envs = [resumable(first_env if i == 0 and first_env is not None else make_gym_env(env_cfg, render_mode,
-                                                                                          not train, **render_kwargs))
-                for i in range(num_envs)]
+    rows = make_rows(env_cfg, num_envs, train, render_mode, first_env, threads, **render_kwargs)
     if seed is not None:
-        for i, env in enumerate(gym_envs):
-            env.reset(seed=seed + i)
-            env.action_space.seed(seed + i)
-    # The same gymnasium env the fast collector steps, wrapped (GymEnv(id, frame_skip=...) would take
-    # frame_skip as its own action repeat instead of passing it to the MuJoCo env).
-    if num_envs == 1:
-        base = GymWrapper(gym_envs[0], device=device)
-    else:  # one batched env over Gymnasium's vector env: one process, no per-env TensorDict (2.7x SerialEnv)
-        vector = gym.vector.SyncVectorEnv([functools.partial(lambda e: e, env) for env in gym_envs],
-                                          autoreset_mode=gym.vector.AutoresetMode.DISABLED)
-        base = GymWrapper(vector, device=device)
-    obs_dim = int(gym_envs[0].observation_space.shape[0])
+        seed_rows(rows, seed)
+    # The same envs the fast collector steps, wrapped (GymEnv(id, frame_skip=...) would take frame_skip as its own
+    # action repeat instead of passing it to the MuJoCo env); several Gymnasium envs or a batch: one batched env.
+    base = GymWrapper(rows.gym_env(), device=device)
+    obs_dim = int(rows.last_obs().shape[1]) if isinstance(rows, BatchRows) else \
+        int(rows.envs[0].observation_space.shape[0])
     if not train and t.obs_norm != "none" and obs_stats is None:
         raise ValueError("a frozen observation normalization needs obs_stats")
     # each segment of the observation scaled as the env declares it (layout.py; one running segment by default)
     obs_norm = make_observation_normalizer(t, obs_dim, obs_stats, frozen=not train, seed=0 if seed is None else seed,
                                            fit_env=functools.partial(make_gym_env, env_cfg) if train else None,
-                                           layout=layout_of(gym_envs[0]))
+                                           layout=rows.layout())
     reward_norm = make_reward_normalizer(t, num_envs, gamma) if train else None
-    state = EnvState(gym_envs, obs_norm, reward_norm)
+    state = EnvState(rows, obs_norm, reward_norm)
     transforms = [state]
     if clip_actions:  # Normal head: the env gets the clipped action, the batch keeps the sample
         spec = base.action_spec

@@ -28,7 +28,7 @@ import numpy as np
 import torch
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
-from ppo_torchrl.envs import env_checks, env_label, episode_seeds, make_torchrl_env
+from ppo_torchrl.envs import batched, env_checks, env_label, episode_seeds, make_torchrl_env
 from ppo_torchrl.filming import VIDEO_SIZE, EpisodeProgress, Filming, video_line
 from ppo_torchrl.env_state import env_state_of
 from ppo_torchrl.errors import ConfigError
@@ -68,6 +68,11 @@ def run_episodes(cfg, ac: ActorCritic, obs_stats: Optional[dict], seeds: Sequenc
     """One episode per seed (each starts from `env.set_seed(seed)`, so any subset of an eval's seeds
     gives the same episodes it gives there); the per-episode record that `summarize` reads. With
     video_path, episodes video_episodes (indices into seeds) are filmed: Filming."""
+    if batched(cfg.env):  # a legged task: its episodes side by side in one batch (tasks/locomotion/evaluation.py)
+        from ppo_torchrl.tasks.locomotion.evaluation import task_episodes
+
+        return task_episodes(cfg, ac, obs_stats, seeds, deterministic, video_path, progress, video_episodes,
+                             video_length, elsewhere)
     episodes = len(seeds)
     render = {"render_mode": "rgb_array", "width": VIDEO_SIZE[0], "height": VIDEO_SIZE[1]} if video_path else {}
     env = make_torchrl_env(cfg.env, clip_actions=ac.head == "normal", gamma=cfg.advantage.gamma,

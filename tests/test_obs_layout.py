@@ -47,15 +47,16 @@ def test_a_go1_reads_a_quarter_leg_step_inside_the_clip_whatever_the_running_sta
     cfg, l = go1_cfg()
     env = make_torchrl_env(cfg.env, clip_actions=True, gamma=0.99, seed=0)
     state = env_state_of(env)
-    norm, gym_env = state.obs_norm, state.gym_envs[0]
+    norm, batch = state.obs_norm, state.rows.batch  # env=legged: one batched env (tasks/locomotion/batch.py)
     heights = norm.layout.where("terrain_heights")
     assert [s.name for s in norm.layout.segments] == ["proprioception", "foot_contacts", "terrain_heights", "clock"]
     env.reset()
-    raw = np.asarray(gym_env.last_obs, np.float64)
-    unwrapped = gym_env.unwrapped
-    ahead = unwrapped._along(unwrapped.data.xpos[unwrapped._body_id]) + unwrapped._sample_offsets
-    on_step = ahead >= unwrapped.step_edge
-    assert unwrapped.step_height == pytest.approx(0.25 * l) and 0 < on_step.sum() < on_step.size
+    raw = np.asarray(batch.last_obs[0], np.float64)
+    terrain, task = batch.task.terrain, batch.task
+    spacing = batch.world.robot.leg_length * cfg.env.legged.height_sample_spacing
+    ahead = terrain.along(batch.datas[0].xpos[batch.world.trunk]) + spacing * np.arange(task.height_samples)
+    on_step = ahead >= terrain.edge[0]
+    assert terrain.height[0] == pytest.approx(0.25 * l) and 0 < on_step.sum() < on_step.size
 
     flat = raw.copy()
     flat[heights] = raw[heights][0]  # what the statistics saw: flat ground under every sample

@@ -64,7 +64,8 @@ class Collection:
                       env_device="cpu", storing_device=device)
         # In one process, the env the collector steps; with workers, the main process's copy of the
         # transforms that holds the merged statistics (never stepped).
-        self.env = make_torchrl_env(cfg.env, num_envs=c.num_envs, seed=seed, first_env=first_env, **env_kwargs)
+        self.env = make_torchrl_env(cfg.env, num_envs=c.num_envs, seed=seed, first_env=first_env,
+                                    threads=c.physics_threads if not self.multi else 1, **env_kwargs)
         self.state = env_state_of(self.env)
         self._key = env_state_key(self.env)
         self._watch: Optional[WorkerWatch] = None  # with worker processes: a death ends the run at once

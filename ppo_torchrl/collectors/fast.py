@@ -40,7 +40,7 @@ class FastCollector(Collector):
         # statistics count each env's first observation when the first rollout acts on it.
         with self.env_state.uncounted():
             super().__init__(env, policy, frames_per_batch=frames_per_batch, **kwargs)
-        self.num_envs = len(self.env_state.gym_envs)
+        self.num_envs = self.env_state.rows.n
         self.steps = frames_per_batch // self.num_envs
         self.numpy_policy = NumpyPolicy.from_actor(self.policy)
         self.rng = np.random.default_rng(0)  # the policy's exploration noise (set_seed reseeds it)
@@ -63,7 +63,7 @@ class FastCollector(Collector):
 
     def _current_obs(self) -> np.ndarray:
         if self._obs is None:
-            self._obs = self.obs_norm(np.stack([env.last_obs for env in self.env_state.gym_envs]), update=not self._counted)
+            self._obs = self.obs_norm(self.env_state.rows.last_obs(), update=not self._counted)
             self.env_state.stepped()  # acted on: a reset before this one stays counted
             self.env_state.emit(self._obs)  # what EnvState saves as the observation each policy acts on next
         return self._obs
@@ -88,21 +88,14 @@ class FastCollector(Collector):
         traj_buf = np.empty((steps, n), np.int64)
         term_buf = np.zeros((steps, n), bool)
         trunc_buf = np.zeros((steps, n), bool)
-        raw_next = np.empty((n, obs_dim))
-        reward = np.empty(n)
-        envs = self.env_state.gym_envs
+        rows = self.env_state.rows
         act, normalize, scale_rewards = policy.act, self.obs_norm, self.reward_norm
         for t in range(steps):
             obs_buf[t] = obs
             traj_buf[t] = self._traj_ids
             act_buf[t], to_env = act(obs, noise[t])
-            reset_rows = []
-            for i, env in enumerate(envs):
-                o, r, term, trunc, _ = env.step(to_env[i])
-                raw_next[i], reward[i] = o, r
-                if term or trunc:
-                    term_buf[t, i], trunc_buf[t, i] = term, trunc
-                    reset_rows.append(i)
+            raw_next, reward, term_buf[t], trunc_buf[t] = rows.step(to_env)  # every row, none reset
+            reset_rows = np.flatnonzero(term_buf[t] | trunc_buf[t]).tolist()
             ep_return[t], ep_length[t] = self.env_state.episodes()  # each env's episode so far (before any reset)
             # The stats see every observation the env emits, as on TorchRL's path: each step's next
             # observation (a final one too), then the reset observation where an episode ended.
@@ -111,7 +104,7 @@ class FastCollector(Collector):
             if reset_rows:
                 obs = next_obs.copy()
                 for i in reset_rows:
-                    obs[i] = normalize(envs[i].reset()[0][None])[0]
+                    obs[i] = normalize(rows.reset_row(i)[None])[0]
                     self._traj_ids[i] = self._traj_ids.max() + 1
             next_buf[t] = next_obs
             rew_buf[t] = scale_rewards(reward, term_buf[t] | trunc_buf[t])

@@ -38,7 +38,7 @@ def worker_env(env_cfg: dict, clip_actions: bool, gamma: float, num_envs: int, o
             signal.signal(signum, signal.SIG_IGN)
     quiet_mujoco()  # a spawned worker is a fresh process: MuJoCo's deprecation notices would print again here
     return make_torchrl_env(OmegaConf.create(env_cfg), clip_actions=clip_actions, gamma=gamma, obs_stats=obs_stats,
-                            train=True, device="cpu", num_envs=num_envs, seed=seed)
+                            train=True, device="cpu", num_envs=num_envs, seed=seed, threads=1)  # a core a worker
 
 
 def make_multi_collector(c, make_env: list, policy, collector_class: type, kwargs: dict):

@@ -1,0 +1,121 @@
+"""The rows of a training env: what EnvState (env_state.py) holds and the fast collector steps, one interface over
+two kinds of env.
+
+- `GymRows`: one Gymnasium env per row (`collector.num_envs` of them, each a positions.ResumableReset over
+  Gymnasium's RecordEpisodeStatistics): the MuJoCo benchmark envs, env=mjcf's robots.
+- `BatchRows`: one batched env of N rows (tasks/locomotion/batch.py, env=legged), stepped in one call.
+
+Both give: `n`; `step(actions)` -> (observations, rewards, terminated, truncated) as arrays, no reset; `reset_row(i)`
+(the row's next episode, or the position held for it); `last_obs()`; `episodes()` (each row's return and length so
+far); `metrics()` (what each row reports: a step env's curriculum, a task's reward terms); `positions()`,
+`restore(positions)` (now) and `hold(positions)` (at each row's next reset: TorchRL's Collector resets first);
+`layout()`; `gym_env()`, a Gymnasium env a TorchRL GymWrapper wraps.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import List
+
+import gymnasium as gym
+import numpy as np
+
+from ppo_torchrl.layout import ObservationLayout, layout_of
+
+
+class GymRows:
+    def __init__(self, envs: list):
+        self.envs = envs
+        self.n = len(envs)
+
+    def step(self, actions: np.ndarray) -> tuple:
+        n = self.n
+        obs, reward = None, np.empty(n)
+        terminated, truncated = np.zeros(n, bool), np.zeros(n, bool)
+        for i, env in enumerate(self.envs):
+            o, r, term, trunc, _ = env.step(actions[i])
+            if obs is None:
+                obs = np.empty((n, len(o)))
+            obs[i], reward[i], terminated[i], truncated[i] = o, r, term, trunc
+        return obs, reward, terminated, truncated
+
+    def reset_row(self, i: int) -> np.ndarray:
+        return self.envs[i].reset()[0]
+
+    def last_obs(self) -> np.ndarray:
+        return np.stack([env.last_obs for env in self.envs])
+
+    def episodes(self) -> tuple:
+        records = [env.record for env in self.envs]
+        return (np.array([r.episode_returns for r in records], np.float64),
+                np.array([r.episode_lengths for r in records], np.int64))
+
+    def metrics(self) -> List[dict]:
+        reports = [env.unwrapped.terrain_metrics() for env in self.envs if hasattr(env.unwrapped, "terrain_metrics")]
+        return [r for r in reports if r]
+
+    def positions(self) -> list:
+        return [env.position() for env in self.envs]
+
+    def restore(self, positions: list) -> None:
+        for env, position in zip(self.envs, positions):
+            env.restore(position)
+
+    def hold(self, positions: list) -> None:
+        for env, position in zip(self.envs, positions):
+            env.pending = position
+
+    def layout(self) -> ObservationLayout:
+        return layout_of(self.envs[0])
+
+    def gym_env(self) -> gym.Env:
+        if self.n == 1:
+            return self.envs[0]
+        # one batched env over Gymnasium's vector env: one process, no per-env TensorDict (2.7x SerialEnv)
+        return gym.vector.SyncVectorEnv([functools.partial(lambda e: e, env) for env in self.envs],
+                                        autoreset_mode=gym.vector.AutoresetMode.DISABLED)
+
+    def close(self) -> None:
+        for env in self.envs:
+            env.close()
+
+
+class BatchRows:
+    def __init__(self, batch):
+        self.batch = batch
+        self.n = batch.num_envs
+
+    def step(self, actions: np.ndarray) -> tuple:
+        obs, reward, terminated, truncated, _ = self.batch.step(actions)
+        return obs, reward, terminated, truncated
+
+    def reset_row(self, i: int) -> np.ndarray:
+        return self.batch.reset_row(i).copy()
+
+    def last_obs(self) -> np.ndarray:
+        return self.batch.last_obs.copy()
+
+    def episodes(self) -> tuple:
+        return self.batch.episodes()
+
+    def metrics(self) -> List[dict]:
+        return self.batch.metrics()
+
+    def positions(self) -> list:
+        return self.batch.positions()
+
+    def restore(self, positions: list) -> None:
+        for i, position in enumerate(positions):
+            self.batch.restore_row(i, position)
+
+    def hold(self, positions: list) -> None:
+        self.batch.pending = list(positions)
+
+    def layout(self) -> ObservationLayout:
+        return self.batch.observation_layout()
+
+    def gym_env(self):
+        return self.batch
+
+    def close(self) -> None:
+        self.batch.close()

@@ -1,0 +1,6 @@
+"""Tasks: what a batch of simulated robots is asked to do, composed of parts with one job each.
+
+`tasks/locomotion/` is the legged robot's wing (env=legged): a robot read from its model (robots/model.py, the
+recipe in robots/recipe.py), a terrain, a command, the contact sensors, one episode memory, and named reward
+terms, stepped as one batched env (`LeggedBatchEnv`, N robots of one model, physics in C++ outside the GIL).
+"""

@@ -1,0 +1,248 @@
+"""The world a legged batch steps: the robot's model compiled once, with everything the recipe changes in it, and
+the facts read from it that every part of the task shares (ids, the drives' control mapping, the feet).
+
+`build_world` takes the env's keyword arguments (envs.gym_make_kwargs: the recipe already scaled to the robot) and
+makes the model exactly as the locomotion env before the rebuild did (robots/env.py, kept for env=mjcf): the step
+added and the robot's contacts filtered at build time (MjSpec; no model file is written), the physics step set,
+torque motors made PD servos around the standing pose, the robustness world's friction and trunk mass, and the
+step box turned to face the heading. Each row of the batch steps its own copy of this model (`row_model`): the
+terrain moves its row's step in it, a randomized world changes it without touching the others.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from dataclasses import dataclass
+from typing import Optional
+
+import mujoco
+import numpy as np
+
+from ppo_torchrl.errors import ConfigError
+from ppo_torchrl.robots.model import Robot, filter_contacts, read_robot
+from ppo_torchrl.robots.terrain import STEP_BODY, TERRAIN_STEP_KEYS, add_step
+
+HEADINGS = {"x": 0.0, "-x": 180.0, "y": 90.0, "-y": 270.0}
+GROUND, FOOT, OTHER, NON_FOOT = 1, 2, 0, 3  # a geom's kind (Contacts): the terrain, a foot, a foot body's other geom, a non-foot body's
+
+
+def heading_angle(heading) -> Optional[float]:
+    """Degrees from +x for x, -x, y, -y or a number; None for auto. ConfigError otherwise."""
+    text = str(heading).strip()
+    if text == "auto":
+        return None
+    if text in HEADINGS:
+        return HEADINGS[text]
+    try:
+        angle = float(text)
+    except ValueError:
+        raise ConfigError(f"env.locomotion.heading={heading} is not known; use x, -x, y, -y, auto (the main body's "
+                          "own +x axis) or an angle in degrees from +x") from None
+    if not math.isfinite(angle):
+        raise ConfigError(f"env.locomotion.heading={heading} must be a finite angle in degrees")
+    return angle
+
+
+@dataclass
+class World:
+    """The compiled model (the template every row copies) and what the task reads of it."""
+
+    model: mujoco.MjModel
+    robot: Robot
+    xml_file: str
+    trunk: int  # body id of the main body
+    frame_skip: int
+    dt: float  # the control step (s)
+    init_qpos: np.ndarray
+    init_qvel: np.ndarray
+    heading: np.ndarray  # unit ground direction [2]
+    heading_is_x: bool
+    init_z: float  # the trunk's height at the standing pose
+    up0: np.ndarray  # world up in the trunk's frame at the standing pose
+    act_dofs: np.ndarray  # the actuated joints' dofs
+    home_ctrl: np.ndarray  # per actuator: the control at the standing pose
+    ctrl_per_action: np.ndarray  # per actuator: the control a full action adds
+    ctrl_low: np.ndarray
+    ctrl_high: np.ndarray
+    torque_limit: np.ndarray  # per actuated joint: the model's own peak torque (the gait figures)
+    feet: np.ndarray  # geom ids, in the robot's corner order (LF, RF, LH, RH)
+    foot_names: tuple
+    corners: Optional[tuple]
+    kind: np.ndarray  # per geom: GROUND, FOOT, OTHER, NON_FOOT
+    foot_index: np.ndarray  # per geom: its place in `feet`, -1 for the rest
+    ending_geom: np.ndarray  # per geom: touching the terrain ends the episode (terminate_on_contact)
+    step_body: int  # the step's body id, -1 without one
+    step_geom: int
+    contact_filter: Optional[tuple]  # env.legged.contacts=terrain: (robot geoms kept, dropped); None otherwise
+
+    def row_model(self) -> mujoco.MjModel:
+        """A row's own copy of the model."""
+        return copy.copy(self.model)
+
+    def ctrl_of(self, actions: np.ndarray) -> np.ndarray:
+        """Each joint's target (standing angle + its scale x action) within the actuator's range: [N, nu]."""
+        return np.clip(self.home_ctrl + self.ctrl_per_action * actions, self.ctrl_low, self.ctrl_high)
+
+
+def _step_needed(xml_file: str, terrain: dict, robot: Robot) -> Optional[tuple]:
+    """add_step's arguments where the terrain asks for a step and the model has none (else None)."""
+    asked = [k for k in TERRAIN_STEP_KEYS + ("eval_step_height",) if terrain.get(k) is not None]
+    probe = mujoco.MjModel.from_xml_path(str(xml_file))
+    if not (asked or terrain.get("curriculum")) or mujoco.mj_name2id(probe, mujoco.mjtObj.mjOBJ_BODY, STEP_BODY) >= 0:
+        return None
+    heights = [terrain.get("step_height"), terrain.get("eval_step_height"), *(terrain.get("step_height_range") or ())]
+    tallest = max([float(h) for h in heights if h is not None] or [0.0])
+    distance = float((terrain.get("step_distance") or [2.0])[0])
+    height = float(terrain.get("step_height") or terrain.get("eval_step_height") or 0.0)
+    return height, distance, max(1.0, 2.0 * tallest), robot.heading
+
+
+def _compile(kwargs: dict, robot: Robot, render: bool) -> tuple:
+    """The model with the step and the contact filter added and the physics step set (MjSpec), as compiled."""
+    from ppo_torchrl.tasks.locomotion.filming import add_track_camera, draw_hidden_robot
+
+    legged, terrain = kwargs.get("legged") or {}, kwargs.get("terrain") or {}
+    spec = mujoco.MjSpec.from_file(str(kwargs["xml_file"]))  # the model file is read, never written
+    step = _step_needed(kwargs["xml_file"], terrain, robot)
+    if step:
+        add_step(spec, *step)
+    contact_filter = filter_contacts(spec) if legged.get("contacts") == "terrain" else None
+    if legged.get("physics_dt"):
+        spec.option.timestep = float(legged["physics_dt"])
+    if render:
+        draw_hidden_robot(spec)
+        add_track_camera(spec, kwargs["main_body"], legged.get("heading", "x"))
+    return spec.compile(), contact_filter
+
+
+def build_world(kwargs: dict, render: bool = False) -> World:
+    """The world of a legged env from its keyword arguments (envs.gym_make_kwargs of env=legged; module doc)."""
+    robot_args, legged = kwargs.get("robot"), dict(kwargs.get("legged") or {})
+    if robot_args is None:
+        raise ConfigError("the batched legged env needs env=legged (a robot read from its model)")
+    robot = read_robot(kwargs["xml_file"], robot_args.get("keyframe"))
+    model, contact_filter = _compile(kwargs, robot, render)
+    trunk = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, str(kwargs["main_body"])) \
+        if not isinstance(kwargs["main_body"], int) else int(kwargs["main_body"])
+    home_ctrl, per_action, low, high = _drive(model, robot, float(robot_args["action_scale"]),
+                                              bool(robot_args["saturation_cap"]))
+    friction, trunk_mass = float(legged.get("friction_scale") or 1.0), float(legged.get("trunk_mass_scale") or 1.0)
+    if friction != 1.0:  # another world than the one trained on: every contact's grip, the trunk's mass and inertia
+        model.geom_friction[:] *= friction
+    if trunk_mass != 1.0:
+        model.body_mass[trunk] *= trunk_mass
+        model.body_inertia[trunk] *= trunk_mass
+    data = mujoco.MjData(model)
+    data.qpos[:] = robot.qpos
+    mujoco.mj_kinematics(model, data)
+    angle = heading_angle(legged.get("heading", "x"))
+    if angle is None:
+        axis = data.xmat[trunk].reshape(3, 3)[:2, 0]
+        if np.linalg.norm(axis) < 1e-6:
+            raise ConfigError("env.locomotion.heading=auto: the main body's +x axis points straight up or down; "
+                              "give the heading as x, -x, y, -y or an angle")
+        heading = axis / np.linalg.norm(axis)
+    else:
+        heading = np.array([math.cos(math.radians(angle)), math.sin(math.radians(angle))])
+    act_dofs = _actuators(model, legged)
+    feet = np.array(robot.feet if not legged.get("foot_geoms") else
+                    [model.geom(n).id for n in legged["foot_geoms"]], np.int64)
+    kind = _kinds(model, trunk, feet)
+    foot_index = np.full(model.ngeom, -1, np.int64)
+    foot_index[feet] = np.arange(len(feet))
+    ending = np.zeros(model.ngeom, bool)
+    for name in legged.get("terminate_on_contact") or []:
+        if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name) < 0:
+            raise ConfigError(f"env.locomotion.terminate_on_contact: {name} is not a body of the model")
+        ending[model.geom_bodyid == model.body(name).id] = True
+    ending &= kind != GROUND
+    step_body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, STEP_BODY)
+    step_geom = -1
+    if step_body > 0:
+        geoms = [g for g in range(model.ngeom) if model.geom_bodyid[g] == step_body]
+        if len(geoms) != 1 or model.geom_type[geoms[0]] != mujoco.mjtGeom.mjGEOM_BOX:
+            raise ConfigError(f"the model's body '{STEP_BODY}' must hold one box geom (the step)")
+        step_geom = geoms[0]
+        half_angle = 0.5 * math.atan2(heading[1], heading[0])  # the box's own x along the heading
+        model.body_quat[step_body] = [math.cos(half_angle), 0.0, 0.0, math.sin(half_angle)]
+    frame_skip = int(kwargs["frame_skip"])
+    names = tuple(model.geom(g).name or (robot.corners[i] if len(feet) == 4 else f"foot {i}")
+                  for i, g in enumerate(feet))
+    return World(model=model, robot=robot, xml_file=str(kwargs["xml_file"]), trunk=trunk, frame_skip=frame_skip,
+                 dt=float(model.opt.timestep) * frame_skip, init_qpos=np.array(robot.qpos),
+                 init_qvel=np.zeros(model.nv), heading=heading, heading_is_x=angle == 0.0,
+                 init_z=float(data.xpos[trunk][2]), up0=data.xmat[trunk].reshape(3, 3)[2].copy(), act_dofs=act_dofs,
+                 home_ctrl=home_ctrl, ctrl_per_action=per_action, ctrl_low=low, ctrl_high=high,
+                 torque_limit=np.array([min(t, 1e30) for t in robot.peak_torque], np.float64), feet=feet,
+                 foot_names=names, corners=tuple(robot.corners) if len(feet) == 4 else None, kind=kind,
+                 foot_index=foot_index, ending_geom=ending, step_body=step_body, step_geom=step_geom,
+                 contact_filter=contact_filter)
+
+
+def _drive(model, robot: Robot, action_scale: float, cap: bool) -> tuple:
+    """Torque motors made PD servos (robots/model.py gives the gains); the action's control mapping."""
+    for a, drive in enumerate(robot.drive):
+        if drive != "motor":
+            continue
+        gear, joint = robot.gear[a], model.actuator_trnid[a, 0]
+        # a MuJoCo position actuator on length gear x q: torque = kp (target - q) - kd qdot for ctrl = gear x target
+        model.actuator_biastype[a] = mujoco.mjtBias.mjBIAS_AFFINE
+        model.actuator_gainprm[a, 0] = robot.kp[a] / gear ** 2
+        model.actuator_biasprm[a, :3] = [0.0, -robot.kp[a] / gear ** 2, -robot.kd[a] / gear ** 2]
+        model.actuator_forcelimited[a] = 1
+        model.actuator_forcerange[a] = [-robot.peak_torque[a] / abs(gear), robot.peak_torque[a] / abs(gear)]
+        model.actuator_ctrllimited[a] = model.jnt_limited[joint]
+        model.actuator_ctrlrange[a] = np.sort(gear * model.jnt_range[joint])
+    gear = np.array(robot.gear)
+    limited = model.actuator_ctrllimited.astype(bool)
+    return (gear * np.array(robot.home_angle), gear * np.array(robot.action_scales(action_scale, cap)),
+            np.where(limited, model.actuator_ctrlrange[:, 0], -np.inf),
+            np.where(limited, model.actuator_ctrlrange[:, 1], np.inf))
+
+
+def _actuators(model, legged: dict) -> np.ndarray:
+    """The actuated joints' dofs, with env.locomotion's torque and speed limits, gains and armature applied."""
+    limit, speed = legged.get("torque_limit"), legged.get("joint_speed_limit")
+    kp, kd, armature = legged.get("kp"), legged.get("kd"), legged.get("armature")
+    actuated = [model.actuator_trnid[i, 0] for i in range(model.nu)
+                if model.actuator_trntype[i] == mujoco.mjtTrn.mjTRN_JOINT]
+    act_dofs = np.array([model.jnt_dofadr[j] for j in actuated], dtype=np.int64)
+    gear = np.abs(model.actuator_gear[:, 0])
+    gear[gear == 0] = 1.0
+    if limit is not None:
+        model.actuator_forcelimited[:] = 1
+        model.actuator_forcerange[:] = np.stack([-limit / gear, limit / gear], axis=1)
+    if kp is not None or kd is not None:
+        servo = (model.actuator_biastype == mujoco.mjtBias.mjBIAS_AFFINE) & np.isclose(
+            model.actuator_biasprm[:, 1], -model.actuator_gainprm[:, 0])
+        if not servo.all():
+            raise ConfigError("env.locomotion.kp / kd set position-servo gains, but this model has actuators that "
+                              "are not position actuators")
+        if kp is not None:
+            model.actuator_gainprm[:, 0] = kp
+            model.actuator_biasprm[:, 1] = -kp
+        if kd is not None:
+            model.actuator_biasprm[:, 2] = -kd
+    if armature is not None:
+        model.dof_armature[act_dofs] = armature
+    if speed is not None:  # the torque-speed line as damping: the net drive torque is 0 at the limit
+        if not model.actuator_forcelimited.all():
+            raise ConfigError("env.locomotion.joint_speed_limit needs a torque limit: set env.locomotion.torque_limit "
+                              "(or forcerange on every actuator)")
+        peak = np.abs(model.actuator_forcerange).max(axis=1) * gear
+        model.dof_damping[act_dofs] += peak / speed
+    return act_dofs
+
+
+def _kinds(model, trunk: int, feet: np.ndarray) -> np.ndarray:
+    """Each geom's kind: GROUND (of a body welded to the world: the floor, the step), FOOT, NON_FOOT (a geom of a
+    robot body that holds no foot: the trunk, a thigh), OTHER (the rest, such as the shank that carries a foot)."""
+    root = model.body_rootid[trunk]
+    robot = [g for g in range(model.ngeom) if model.body_rootid[model.geom_bodyid[g]] == root]
+    kind = np.full(model.ngeom, OTHER, np.int8)
+    kind[model.body_weldid[model.geom_bodyid] == 0] = GROUND
+    foot_bodies = set(model.geom_bodyid[feet].tolist())
+    kind[[g for g in robot if model.geom_bodyid[g] not in foot_bodies]] = NON_FOOT
+    kind[feet] = FOOT
+    return kind
