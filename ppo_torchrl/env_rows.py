@@ -7,7 +7,8 @@ two kinds of env.
 
 Both give: `n`; `step(actions)` -> (observations, rewards, terminated, truncated) as arrays, no reset; `reset_row(i)`
 (the row's next episode, or the position held for it); `last_obs()`; `episodes()` (each row's return and length so
-far); `metrics()` (what each row reports: a step env's curriculum, a task's reward terms); `positions()`,
+far); `metrics()` (what each row reports: a step env's curriculum, a task's reward terms) and `metric_keys()` (the
+keys beyond loggers.COLUMNS that metrics.csv gets a column for); `positions()`,
 `restore(positions)` (now) and `hold(positions)` (at each row's next reset: TorchRL's Collector resets first);
 `layout()`; `gym_env()`, a Gymnasium env a TorchRL GymWrapper wraps.
 """
@@ -53,6 +54,9 @@ class GymRows:
     def metrics(self) -> List[dict]:
         reports = [env.unwrapped.terrain_metrics() for env in self.envs if hasattr(env.unwrapped, "terrain_metrics")]
         return [r for r in reports if r]
+
+    def metric_keys(self) -> List[str]:
+        return []
 
     def positions(self) -> list:
         return [env.position() for env in self.envs]
@@ -100,6 +104,9 @@ class BatchRows:
 
     def metrics(self) -> List[dict]:
         return self.batch.metrics()
+
+    def metric_keys(self) -> List[str]:
+        return [f"reward/{name}" for name in self.batch.task.names]
 
     def positions(self) -> list:
         return self.batch.positions()

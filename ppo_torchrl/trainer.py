@@ -188,7 +188,8 @@ class Trainer:
         cfg = self.cfg
         if self.resumed:
             truncate_logs(self.run_dir, self.frames)
-        self.metrics = MetricsFile(self.run_dir / "metrics.csv", COLUMNS, append=self.resumed)
+        columns = COLUMNS + [k for k in self.collector.metric_keys() if k not in COLUMNS]  # the task's own too
+        self.metrics = MetricsFile(self.run_dir / "metrics.csv", columns, append=self.resumed)
         if not self.resumed:  # a resume's overrides reach config.yaml once an iteration has completed
             self.write_config()
         self.life.commit(self.run_dir)  # set up without error: the run starts, what overwrite=true replaced goes

@@ -122,6 +122,10 @@ class Collection:
         finished, self._finished = self._finished, []
         return finished
 
+    def metric_keys(self) -> List[str]:
+        """The env's metrics beyond loggers.COLUMNS (a task's reward terms: reward/<name>), for metrics.csv."""
+        return self.state.rows.metric_keys()
+
     def env_metrics(self) -> Dict[str, float]:
         """A step env's curriculum level and recent success rate; {} where the envs say nothing."""
         return self._metrics

@@ -30,18 +30,16 @@ def draw_hidden_robot(spec) -> bool:
     return bool(hidden)
 
 
-def ground_heading(heading_text, axis_xy) -> np.ndarray:
-    """The heading as a unit ground vector: an angle in degrees (or x, -x, y, -y), else (auto) `axis_xy`."""
-    from ppo_torchrl.tasks.locomotion.world import heading_angle
-
-    angle = heading_angle(heading_text)
+def ground_heading(angle, axis_xy) -> np.ndarray:
+    """The heading as a unit ground vector: an angle in degrees, else (None: auto) `axis_xy`."""
     if angle is None:
         return axis_xy / max(np.linalg.norm(axis_xy), 1e-9)
     return np.array([math.cos(math.radians(angle)), math.sin(math.radians(angle))])
 
 
-def add_track_camera(spec, main_body, heading_text) -> bool:
-    """Adds the `track` camera on the main body, beside it and looking at it, where the model has none; False (no
+def add_track_camera(spec, main_body, heading) -> bool:
+    """Adds the `track` camera on the main body (heading: degrees from +x, None for its own +x axis), beside it and
+    looking at it, where the model has none; False (no
     camera: render from the free camera) where it has one already or the main body has no name."""
     plain = spec.compile()
     if any(plain.camera(i).name == TRACK for i in range(plain.ncam)):
@@ -52,7 +50,7 @@ def add_track_camera(spec, main_body, heading_text) -> bool:
     sub = [g for g in range(plain.ngeom) if plain.body_rootid[plain.geom_bodyid[g]] == plain.body_rootid[body.id]]
     origin = data.xpos[body.id]
     extent = max([np.linalg.norm(data.geom_xpos[g] - origin) + plain.geom_rbound[g] for g in sub] or [0.5])
-    heading = ground_heading(heading_text, data.xmat[body.id].reshape(3, 3)[:2, 0])
+    heading = ground_heading(heading, data.xmat[body.id].reshape(3, 3)[:2, 0])
     left = np.array([-heading[1], heading[0], 0.0])
     forward = np.array([heading[0], heading[1], 0.0])
     distance = 4.0 * extent

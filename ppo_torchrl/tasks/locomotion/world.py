@@ -112,7 +112,7 @@ def _compile(kwargs: dict, robot: Robot, render: bool) -> tuple:
         spec.option.timestep = float(legged["physics_dt"])
     if render:
         draw_hidden_robot(spec)
-        add_track_camera(spec, kwargs["main_body"], legged.get("heading", "x"))
+        add_track_camera(spec, kwargs["main_body"], heading_angle(legged.get("heading", "x")))
     return spec.compile(), contact_filter
 
 
