@@ -30,6 +30,7 @@ from ppo_torchrl.normalization import (
 from ppo_torchrl.env_rows import BatchRows, GymRows
 from ppo_torchrl.env_state import EnvState
 from ppo_torchrl.layout import OBS_LAYOUTS
+from ppo_torchrl.mjcf import FLOOR_DRAWN_M, MjcfInfo, check_mjcf, floor_to_the_horizon  # noqa: F401 (their home)
 from ppo_torchrl.positions import resumable
 
 # Gymnasium's v4 MuJoCo envs warn on every make that v5 exists; the warning is not actionable here.
@@ -114,13 +115,6 @@ def resolve_model_file(xml_file: str) -> Path:
     raise ConfigError(f"env.xml_file={xml_file}: no such file (a path, or a shipped model: {shipped})")
 
 
-@dataclass(frozen=True)
-class MjcfInfo:
-    cameras: tuple  # camera names
-    bodies: tuple  # body names, by id
-    ctrl_from_force: tuple  # (actuator id, low, high): no ctrlrange, control bounds from its forcerange
-
-
 def _scaled_for_checks(env_cfg):
     """The env config whose locomotion and terrain values are checked: env=legged's scaled to its robot
     (read from env.xml_file: a model that cannot be read is one line here), any other as it is."""
@@ -145,37 +139,6 @@ def env_checks(env_cfg) -> list:
         return legged
     scaled = _scaled_for_checks(env_cfg)
     return legged + locomotion_checks(scaled.locomotion) + terrain_checks(scaled.get("terrain"))
-
-
-@functools.lru_cache(maxsize=None)
-def check_mjcf(path: Path) -> MjcfInfo:
-    """The model must compile in MuJoCo, have a free-floating base and at least one actuator, each
-    actuator with control bounds: its ctrlrange or, without one, its forcerange / gear."""
-    import mujoco
-
-    try:
-        model = mujoco.MjModel.from_xml_path(str(path))
-    except ValueError as exc:
-        first = next((l.strip() for l in str(exc).splitlines() if l.strip()), type(exc).__name__)
-        raise ConfigError(f"env.xml_file={path} is not a valid MuJoCo model: {first}") from None
-    if not (model.jnt_type == mujoco.mjtJoint.mjJNT_FREE).any():
-        raise ConfigError(f"env.xml_file={path} has no free joint: env=mjcf needs a free-floating base "
-                          "(add <freejoint/> to the robot's root body)")
-    if model.nu == 0:
-        raise ConfigError(f"env.xml_file={path} has no actuators: there is nothing for the policy to control")
-    from_force = []
-    for i in range(model.nu):
-        low, high = model.actuator_ctrlrange[i]
-        if model.actuator_ctrllimited[i] and low < high:
-            continue
-        gear = float(model.actuator_gear[i][0]) or 1.0
-        if not (model.actuator_forcelimited[i] and model.actuator_forcerange[i][0] < model.actuator_forcerange[i][1]):
-            raise ConfigError(f"env.xml_file={path}: actuator '{model.actuator(i).name or i}' has no ctrlrange (nor "
-                              "forcerange), so its action bounds would be [0, 0]; give it ctrlrange=\"low high\"")
-        bounds = sorted(float(f) / gear for f in model.actuator_forcerange[i])
-        from_force.append((i, bounds[0], bounds[1]))
-    return MjcfInfo(cameras=tuple(model.camera(i).name for i in range(model.ncam)),
-                    bodies=tuple(model.body(i).name for i in range(model.nbody)), ctrl_from_force=tuple(from_force))
 
 
 def mjcf_kwargs(env_cfg) -> dict:
@@ -280,29 +243,6 @@ def tracking_camera(env_id: str) -> dict:
     return {"camera_name": TRACKING_CAMERA} if isinstance(creator, type) and issubclass(creator, MujocoEnv) else {}
 
 
-FLOOR_DRAWN_M = 500.0  # half-width a filmed floor is drawn to
-
-
-def floor_to_the_horizon(env) -> None:
-    """A MuJoCo plane collides everywhere but is drawn only within its size: Gymnasium's Hopper floor ends
-    at 20 m, which its best policies pass in 1000 steps and then hop over the void. For filming, planes are
-    drawn FLOOR_DRAWN_M wide, their texture repeated in proportion (the same squares); nothing the physics
-    reads changes."""
-    import mujoco
-
-    model = getattr(env, "model", None)
-    if model is None:
-        return
-    for g in np.flatnonzero(model.geom_type == mujoco.mjtGeom.mjGEOM_PLANE):
-        size = model.geom_size[g, :2].copy()
-        if size.min() <= 0 or size.min() >= FLOOR_DRAWN_M:  # 0: drawn without end already
-            continue
-        model.geom_size[g, :2] = FLOOR_DRAWN_M
-        material = model.geom_matid[g]
-        if material >= 0 and not model.mat_texuniform[material]:
-            model.mat_texrepeat[material] *= FLOOR_DRAWN_M / size
-
-
 def make_gym_env(env_cfg, render_mode: Optional[str] = None, evaluation: bool = False, **render_kwargs) -> gym.Env:
     kwargs = gym_make_kwargs(env_cfg, render_mode, evaluation, **render_kwargs)
     env_id = env_cfg.id
@@ -405,9 +345,9 @@ def env_spec(env_cfg, keep_env: bool = False) -> EnvSpec:
 
 
 def batched(env_cfg) -> bool:
-    """env=legged steps its robots as one batched env (tasks/locomotion/batch.py); every other env one Gymnasium env
-    per row."""
-    return env_cfg.get("legged") is not None and bool(env_cfg.get("xml_file"))
+    """A robot of a model file (env=legged, env=mjcf and the in-house quadruped presets) is stepped as one batched env
+    (tasks/locomotion/batch.py); every other env one Gymnasium env per row."""
+    return bool(env_cfg.get("xml_file"))
 
 
 def make_batch(env_cfg, num_envs: int = 1, evaluation: bool = False, render_mode: Optional[str] = None,

@@ -29,7 +29,7 @@ from ppo_torchrl.collectors import make_collector
 from ppo_torchrl.envs import EnvSpec, env_label, seed_everything
 from ppo_torchrl.errors import ConfigError, Interrupted, TrainingError
 from ppo_torchrl.eval_worker import BackgroundEval, use_background_eval
-from ppo_torchrl.evaluate import GAIT_KEYS, evaluate_policy
+from ppo_torchrl.evaluate import evaluate_policy
 from ppo_torchrl.lifecycle import Lifecycle
 from ppo_torchrl.loggers import (COLUMNS, MetricsFile, Progress, amend_last_row, close_logger, make_logger,
                                  truncate_logs)
@@ -407,9 +407,7 @@ class Trainer:
             state_then["last_eval"] = self.last_eval
             self.ckpt.offer_best(state_then, result["return_mean"])
         row = {"eval/return_mean": result["return_mean"], "eval/return_std": result["return_std"],
-               "eval/length_mean": result["length_mean"],
-               "eval/forward_velocity": result.get("forward_velocity_mean"),
-               "eval/success_rate": result.get("success_rate")}
+               "eval/length_mean": result["length_mean"], **result.get("columns", {})}  # the task's own columns
         return {k: v for k, v in row.items() if v is not None}
 
     def _log(self, row: dict) -> None:
@@ -479,7 +477,7 @@ class Trainer:
             "eval_return_mean": last_eval.get("return_mean"),
             "eval_return_std": last_eval.get("return_std"),
             "eval_frames": last_eval.get("frames"),
-            **{k: last_eval[k] for k in ("forward_velocity_mean", "success_rate", *GAIT_KEYS) if k in last_eval},
+            **{k: last_eval[k] for k in last_eval.get("task_keys", ()) if k in last_eval},  # the task's figures
             "train_return_last100": float(np.mean(self.recent_returns)) if self.recent_returns else None,
             "best_eval_return": self.ckpt.best_return,
             "run_dir": str(self.run_dir),

@@ -58,7 +58,7 @@ def lockstep(cfg, steps: int, seed: int = 5, scale: float = 0.3) -> dict:
 
 def assert_close(worst: dict, terms: set) -> None:
     assert worst["obs"] == 0.0  # the observation is computed from the same floats in the same order
-    assert worst["reward"] < 1e-7
+    assert worst["reward"] < 1e-7  # the control cost: float64 here, float32 there (NumPy 2's promotion), ~3e-9
     assert {k[len("reward_"):] for k in worst if k.startswith("reward_")} == terms
     assert all(worst[k] < 1e-7 for k in worst if k.startswith("reward_"))
 
@@ -87,6 +87,13 @@ def test_every_reward_term_and_issue_46s_recipe_match():
     assert_close(worst, V2_TERMS | {"stumble", "air_time", "joint_speed_limit"})
     worst = lockstep(legged_config(ANYMAL, recipe="legged_trot"), 600, seed=4)  # every contact, the model's step
     assert_close(worst, V2_TERMS - {"long_swing"})
+
+
+def test_the_in_house_quadruped_presets_match_too():
+    """env=mjcf's robots (the model as it is, the action its controls): the zoo's climbing quadruped's recipe."""
+    worst = lockstep(compose_config(["experiment=quadruped_climb"]), 600, seed=2)
+    assert_close(worst, {"forward", "survive", "ctrl", "contact", "torque", "joint_speed", "joint_speed_limit",
+                         "action_rate", "base_height", "orientation", "foot_slip", "air_time", "body_contact"})
 
 
 def test_n_rows_are_n_envs_whatever_the_threads():

@@ -13,6 +13,7 @@ import pytest
 from omegaconf import OmegaConf
 
 from ppo_torchrl import evaluate
+from ppo_torchrl.tasks.locomotion import figures
 from ppo_torchrl.envs import gym_make_kwargs, make_gym_env
 from ppo_torchrl.positions import get_env_state, set_env_state
 from ppo_torchrl.trainer import Trainer
@@ -526,7 +527,7 @@ def test_evaluate_at_a_step_height_reports_gait_figures(step_run, capsys):
     saved = json.loads((step_run / "eval" / "eval.json").read_text())
     assert saved["step_height_mean"] == pytest.approx(0.05) and saved["overrides"] == ["env.terrain.step_height=0.05"]
     for key in ("success_rate", "crossed_at_end_rate", "terminated_share", "stride_frequency", "duty_factor",
-                "peak_joint_speed", "over_speed_limit_share", "body_contact_share", *evaluate.GAIT_KEYS):
+                "peak_joint_speed", "over_speed_limit_share", "body_contact_share", *figures.GAIT_KEYS):
         assert key in result and key in saved
     assert saved["feet"] == ["LF_foot", "RF_foot", "LH_foot", "RH_foot"]  # the model's foot order
     assert len(saved["foot_contact_share"]) == len(saved["touchdown_frequency"]) == 4
@@ -534,7 +535,7 @@ def test_evaluate_at_a_step_height_reports_gait_figures(step_run, capsys):
     outcomes = saved["outcomes"]  # one record per episode
     assert [o["seed"] for o in outcomes] == [0, 1] and [o["length"] for o in outcomes] == saved["lengths"]
     assert saved["success_rate"] == np.mean([o["crossed"] and not o["terminated"] for o in outcomes])
-    assert all(len(o[key]) == 4 for o in outcomes for key in evaluate.EPISODE_FOOT_KEYS)  # per foot, per episode
+    assert all(len(o[key]) == 4 for o in outcomes for key in figures.EPISODE_FOOT_KEYS)  # per foot, per episode
     printed = capsys.readouterr().out
     assert f"{saved['success_rate']:.0%} of episodes cross the line" in printed and "are not terminated" in printed
     assert f"LF_foot {saved['foot_contact_share'][0]:.2f}" in printed
@@ -544,7 +545,7 @@ def test_evaluate_at_a_step_height_reports_gait_figures(step_run, capsys):
 
 
 def test_the_gait_meter_counts_the_time_a_joint_is_over_the_speed_limit():
-    from ppo_torchrl.evaluate import gait_figures
+    from ppo_torchrl.tasks.locomotion.figures import gait_figures
     from ppo_torchrl.robots.gait import GaitMeter
 
     episodes = []
@@ -565,7 +566,7 @@ def test_success_is_crossing_without_a_fall_or_a_forbidden_contact():
     record = {"returns": [1.0, 2.0, 3.0, 4.0], "lengths": [500, 120, 500, 80], "dt": 0.02, "success_margin": 0.5,
               "distances": [(5.0, 5.0)] * 4, "gaits": [gait] * 4, "heights": [0.15] * 4, "seeds": [10, 11, 12, 13],
               "crossed": [True, True, False, False], "terminated": [False, True, False, True],
-              "ends": [None, "contact: trunk", None, "fall"], "feet": ("a", "b", "c", "d")}
+              "ends": [None, "contact: trunk", None, "fall"], "feet": ("a", "b", "c", "d"), "figures": "locomotion"}
     result = evaluate.summarize(compose_config(["env=quadruped_step"]), record)
     # beyond the line at the end: 2 of 4; of them one ended on its trunk: 1 of 4 succeeds
     assert (result["success_rate"], result["crossed_at_end_rate"], result["terminated_share"]) == (0.25, 0.5, 0.5)
@@ -573,7 +574,7 @@ def test_success_is_crossing_without_a_fall_or_a_forbidden_contact():
     assert [(o["seed"], o["crossed"], o["success"], o["termination"]) for o in result["outcomes"]] == [
         (10, True, True, None), (11, True, False, "contact: trunk"), (12, False, False, None),
         (13, False, False, "fall")]
-    line = evaluate.motion_line(result)
+    line = evaluate.result_lines(result)
     assert "25% of episodes cross the line 0.5 m beyond the step" in line and "50% are beyond it at the end" in line
     assert "50% end terminated (25% contact: trunk, 25% fall)" in line
     # an env without its own reason (not a locomotion env) still counts its terminated episodes
@@ -585,7 +586,7 @@ def test_success_is_crossing_without_a_fall_or_a_forbidden_contact():
 def gait_of(pattern: str, corners=("LF", "RF", "LH", "RH"), repeats: int = 20):
     """Per-foot figures of a repeated contact pattern: each character a 0.05 s phase, the feet down in it
     ('a' LF+RH, 'b' RF+LH, 'l' LF+LH, 'r' RF+RH, 'f' LF+RF, 'h' LH+RH, '3' all but RH, '-' none)."""
-    from ppo_torchrl.evaluate import gait_figures
+    from ppo_torchrl.tasks.locomotion.figures import gait_figures
     from ppo_torchrl.robots.gait import GaitMeter
 
     down = {"a": "LF RH", "b": "RF LH", "l": "LF LH", "r": "RF RH", "f": "LF RF", "h": "LH RH", "3": "LF RF LH",
@@ -614,7 +615,7 @@ def test_per_foot_gait_figures_tell_a_trot_a_pace_a_bound_and_a_limp_apart():
     assert gait_of("a-b-", corners=("RH", "LH", "RF", "LF"))["diagonal_pairs_together"] == 1.0
     from ppo_torchrl.robots.gait import GaitMeter
 
-    assert "diagonal_pairs_together" not in evaluate.gait_figures([GaitMeter(3).summary()], None)  # no corners
+    assert "diagonal_pairs_together" not in figures.gait_figures([GaitMeter(3).summary()], None)  # no corners
 
 
 def test_a_foot_held_up_at_a_standstill_is_not_counted_as_in_the_air_while_moving():

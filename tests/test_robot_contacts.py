@@ -257,7 +257,7 @@ def test_a_foot_against_the_steps_riser_is_a_stumble_and_a_foot_on_its_top_is_no
 def test_the_eval_step_a_video_films_is_the_sweeps_step_to_the_micrometre():
     """Issue 59 item 7: evaluate's default step (what video=true films) and heights=0.25l's step are one number."""
     from ppo_torchrl.compose import compose
-    from ppo_torchrl.evaluate import heights_in_metres, parse_heights
+    from ppo_torchrl.tasks.locomotion.sweep import heights_in_metres, parse_heights
     from ppo_torchrl.robots.model import read_robot
     from ppo_torchrl.robots.recipe import scaled_env
 

@@ -127,7 +127,7 @@ def test_eval_env_keeps_the_models_frame_skip_and_time_limit(tiny_cfg):
                            train=False)
     from ppo_torchrl.env_state import env_state_of
 
-    assert env_state_of(env).gym_envs[0].unwrapped.frame_skip == 4
+    assert env_state_of(env).rows.batch.world.frame_skip == 4  # a model file's robot: the batched env
     rollout = env.rollout(1000, break_when_any_done=True)
     assert rollout.shape[-1] == 30
 

@@ -4,3 +4,12 @@
 recipe in robots/recipe.py), a terrain, a command, the contact sensors, one episode memory, and named reward
 terms, stepped as one batched env (`LeggedBatchEnv`, N robots of one model, physics in C++ outside the GIL).
 """
+
+FIGURES = {"locomotion": "ppo_torchrl.tasks.locomotion.figures"}  # an evaluation record's kind -> its figures
+
+
+def figures_module(kind):
+    """The module that summarizes and prints an evaluation record of `kind` (record["figures"]), or None."""
+    import importlib
+
+    return importlib.import_module(FIGURES[kind]) if kind in FIGURES else None

@@ -76,17 +76,15 @@ class LeggedBatchEnv(gym.vector.VectorEnv):
         self.render_mode, self.width, self.height = render_mode, int(width), int(height)
         self._renderer = None
         if render_mode is not None:  # row 0 is filmed: its floor drawn to the horizon, its buffer the video's size
-            from types import SimpleNamespace
-
-            from ppo_torchrl.envs import floor_to_the_horizon
+            from ppo_torchrl.mjcf import floor_to_the_horizon
 
             filmed = self.models[0]
-            floor_to_the_horizon(SimpleNamespace(model=filmed))
+            floor_to_the_horizon(filmed)
             filmed.vis.global_.offwidth = max(filmed.vis.global_.offwidth, self.width)
             filmed.vis.global_.offheight = max(filmed.vis.global_.offheight, self.height)
         self.timing: Optional[dict] = None  # {"physics": s, "task": s} accumulated when set (benchmarks/legged_speed.py)
         self.single_observation_space = gym.spaces.Box(-np.inf, np.inf, (task.obs_dim,), np.float64)
-        self.single_action_space = gym.spaces.Box(-1.0, 1.0, (model.nu,), np.float32)
+        self.single_action_space = gym.spaces.Box(*world.action_bounds(), (model.nu,), np.float32)
         self.observation_space = gym.vector.utils.batch_space(self.single_observation_space, n)
         self.action_space = gym.vector.utils.batch_space(self.single_action_space, n)
         self.autoreset_mode = gym.vector.AutoresetMode.DISABLED

@@ -38,17 +38,17 @@ class GaitBatch:
         feet = np.zeros(len(w.feet), bool)
         feet[w.foot_index[partners[kinds == FOOT]]] = True
         body = bool((kinds == NON_FOOT).any())
-        torque = float((np.abs(data.qfrc_actuator[w.act_dofs]) / w.torque_limit).max())
+        torque = None if w.torque_limit is None else \
+            float((np.abs(data.qfrc_actuator[w.act_dofs]) / w.torque_limit).max())
         self.meters[i].add(feet, joint_speed, body, dt, moving, torque)
 
 
 @torch.no_grad()
-def task_episodes(cfg, ac, obs_stats: Optional[dict], seeds: Sequence[int], deterministic: bool = True,
+def task_episodes(make_batch, cfg, ac, obs_stats: Optional[dict], seeds: Sequence[int], deterministic: bool = True,
                   video_path=None, progress: Optional[bool] = None, video_episodes: Sequence[int] = (0,),
                   video_length: Optional[float] = None, elsewhere: int = 0) -> dict:
-    """evaluate.run_episodes for a legged task (module doc): one episode per seed, the same record."""
-    from ppo_torchrl.envs import make_batch
-    from ppo_torchrl.export import DeployedPolicy
+    """evaluate.run_episodes for a legged task (module doc): one episode per seed, the same record. make_batch:
+    envs.make_batch (the batch of the task's config)."""
     from ppo_torchrl.filming import VIDEO_SIZE, EpisodeProgress, Filming
     from ppo_torchrl.models import NumpyPolicy
     from ppo_torchrl.normalization import make_observation_normalizer
@@ -70,11 +70,19 @@ def task_episodes(cfg, ac, obs_stats: Optional[dict], seeds: Sequence[int], dete
         ac = copy.deepcopy(ac)
         ac.actor.cpu()
         ac.action_low, ac.action_high = ac.action_low.cpu(), ac.action_high.cpu()
-    if deterministic:
-        deployed = DeployedPolicy(ac, norm.module()).eval()
+    if deterministic:  # what a one-env evaluation's TorchRL env and actor compute, so its episodes to the bit
+        from tensordict import TensorDict
 
-        def act(obs):
-            return deployed(torch.from_numpy(obs)).numpy()
+        from ppo_torchrl.models import deterministic_policy
+
+        actor = deterministic_policy(ac)
+        low, high = ac.action_low.numpy(), ac.action_high.numpy()
+
+        def act(obs):  # row by row: a batched matmul rounds otherwise, and an episode would depend on its row count
+            normalized = torch.from_numpy(norm(obs, update=False))
+            out = [actor(TensorDict({"observation": normalized[i:i + 1]}, batch_size=[1]))["action"] for i in range(rows)]
+            action = torch.cat(out).numpy()
+            return np.clip(action, low, high) if ac.head == "normal" else action
     else:
         sampler, rng = NumpyPolicy.from_actor(ac.actor), np.random.default_rng(int(seeds[0]) if len(seeds) else 0)
         sampler.sync()
@@ -91,9 +99,12 @@ def task_episodes(cfg, ac, obs_stats: Optional[dict], seeds: Sequence[int], dete
     callbacks = [None] * rows
     following, done_count = 0, 0
 
+    rewards = [[] for _ in range(rows)]
+
     def begin(i: int) -> None:
         nonlocal following
         episode_of[i] = following
+        rewards[i] = []
         if following < episodes:
             # as a one-env evaluation starts an episode: TorchRL's set_seed resets the env with the seed, then the
             # rollout's reset draws the episode (so the episode seeded s is that env's second draw)
@@ -112,17 +123,20 @@ def task_episodes(cfg, ac, obs_stats: Optional[dict], seeds: Sequence[int], dete
         begin(i)
     try:
         while done_count < episodes:
-            obs, _, terminated, truncated, _ = batch.step(act(batch.last_obs))
+            obs, reward, terminated, truncated, _ = batch.step(act(batch.last_obs))
             done = terminated | truncated
             for i in range(rows):
                 e = episode_of[i]
                 if e < 0 or e >= episodes:
                     continue
+                rewards[i].append(reward[i])
                 if not done[i]:
                     if callbacks[i] is not None:
                         callbacks[i]()
                     continue
                 _record(record, e, batch, i, start_xy[i], bool(terminated[i]))
+                # the return as TorchRL's rollout sums it (float32 rewards), so a one-env evaluation's figure to the bit
+                record["returns"][e] = float(torch.tensor(rewards[i], dtype=torch.float32).sum())
                 done_count += 1
                 if film is not None:
                     shown.update(done_count, film.spent_s, film.left_s(done_count, [n for n in record["lengths"]
@@ -139,7 +153,7 @@ def task_episodes(cfg, ac, obs_stats: Optional[dict], seeds: Sequence[int], dete
             "heights": record["heights"] if has_step else [], "dt": world.dt,
             "success_margin": task.terrain.success_margin if has_step and episodes else None, "video": video,
             "terminated": record["terminated"], "ends": record["ends"], "seeds": list(seeds),
-            "feet": tuple(world.foot_names)}
+            "feet": tuple(world.foot_names), "figures": "locomotion"}
 
 
 def _record(record: dict, e: int, batch, i: int, start_xy, terminated: bool) -> None:

@@ -72,7 +72,8 @@ def survive(s: Step) -> np.ndarray:
 
 @term("ctrl", "ctrl_cost_weight", base=True)
 def ctrl(s: Step) -> np.ndarray:
-    return -np.square(s.action).sum(axis=1)
+    # in float64 (Gymnasium's control_cost on a float32 action is float32 through NumPy 2's promotion: ~3e-9 apart)
+    return -np.square(s.action.astype(np.float64)).sum(axis=1)
 
 
 @term("contact", "contact_cost_weight", needs=("cfrc",), base=True)

@@ -49,7 +49,7 @@ class World:
     """The compiled model (the template every row copies) and what the task reads of it."""
 
     model: mujoco.MjModel
-    robot: Robot
+    robot: Optional[Robot]  # env=legged's robot read from its model; None: the model as it is (env=mjcf)
     xml_file: str
     trunk: int  # body id of the main body
     frame_skip: int
@@ -65,7 +65,7 @@ class World:
     ctrl_per_action: np.ndarray  # per actuator: the control a full action adds
     ctrl_low: np.ndarray
     ctrl_high: np.ndarray
-    torque_limit: np.ndarray  # per actuated joint: the model's own peak torque (the gait figures)
+    torque_limit: Optional[np.ndarray]  # per actuated joint: the model's own peak torque (the gait figures)
     feet: np.ndarray  # geom ids, in the robot's corner order (LF, RF, LH, RH)
     foot_names: tuple
     corners: Optional[tuple]
@@ -81,8 +81,18 @@ class World:
         return copy.copy(self.model)
 
     def ctrl_of(self, actions: np.ndarray) -> np.ndarray:
-        """Each joint's target (standing angle + its scale x action) within the actuator's range: [N, nu]."""
+        """Each joint's target (standing angle + its scale x action) within the actuator's range, [N, nu]; without
+        a robot read from its model, the action as it is."""
+        if self.robot is None:
+            return actions
         return np.clip(self.home_ctrl + self.ctrl_per_action * actions, self.ctrl_low, self.ctrl_high)
+
+    def action_bounds(self) -> tuple:
+        """(low, high) of one action: [-1, 1] for a robot read from its model, else the actuators' control ranges."""
+        if self.robot is not None:
+            return -np.ones(self.model.nu, np.float32), np.ones(self.model.nu, np.float32)
+        bounds = self.model.actuator_ctrlrange.astype(np.float32)
+        return bounds[:, 0].copy(), bounds[:, 1].copy()
 
 
 def _step_needed(xml_file: str, terrain: dict, robot: Robot) -> Optional[tuple]:
@@ -117,16 +127,24 @@ def _compile(kwargs: dict, robot: Robot, render: bool) -> tuple:
 
 
 def build_world(kwargs: dict, render: bool = False) -> World:
-    """The world of a legged env from its keyword arguments (envs.gym_make_kwargs of env=legged; module doc)."""
+    """The world of a locomotion env from its keyword arguments (envs.gym_make_kwargs; module doc): env=legged's robot
+    read from its model, or (env=mjcf, the in-house quadruped presets) the model as it is, the action its controls."""
     robot_args, legged = kwargs.get("robot"), dict(kwargs.get("legged") or {})
-    if robot_args is None:
-        raise ConfigError("the batched legged env needs env=legged (a robot read from its model)")
-    robot = read_robot(kwargs["xml_file"], robot_args.get("keyframe"))
-    model, contact_filter = _compile(kwargs, robot, render)
+    robot = None if robot_args is None else read_robot(kwargs["xml_file"], robot_args.get("keyframe"))
+    if robot is not None:
+        model, contact_filter = _compile(kwargs, robot, render)
+    else:
+        model, contact_filter = _plain_model(kwargs, render), None
     trunk = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, str(kwargs["main_body"])) \
         if not isinstance(kwargs["main_body"], int) else int(kwargs["main_body"])
-    home_ctrl, per_action, low, high = _drive(model, robot, float(robot_args["action_scale"]),
-                                              bool(robot_args["saturation_cap"]))
+    if robot is not None:
+        home_ctrl, per_action, low, high = _drive(model, robot, float(robot_args["action_scale"]),
+                                                  bool(robot_args["saturation_cap"]))
+        init_qpos = np.array(robot.qpos)
+    else:  # the action is the control, within the actuators' ranges (MuJoCo clamps limited controls)
+        home_ctrl, per_action = np.zeros(model.nu), np.ones(model.nu)
+        low, high = np.full(model.nu, -np.inf), np.full(model.nu, np.inf)
+        init_qpos = model.qpos0.copy()
     friction, trunk_mass = float(legged.get("friction_scale") or 1.0), float(legged.get("trunk_mass_scale") or 1.0)
     if friction != 1.0:  # another world than the one trained on: every contact's grip, the trunk's mass and inertia
         model.geom_friction[:] *= friction
@@ -134,7 +152,7 @@ def build_world(kwargs: dict, render: bool = False) -> World:
         model.body_mass[trunk] *= trunk_mass
         model.body_inertia[trunk] *= trunk_mass
     data = mujoco.MjData(model)
-    data.qpos[:] = robot.qpos
+    data.qpos[:] = init_qpos
     mujoco.mj_kinematics(model, data)
     angle = heading_angle(legged.get("heading", "x"))
     if angle is None:
@@ -146,9 +164,10 @@ def build_world(kwargs: dict, render: bool = False) -> World:
     else:
         heading = np.array([math.cos(math.radians(angle)), math.sin(math.radians(angle))])
     act_dofs = _actuators(model, legged)
-    feet = np.array(robot.feet if not legged.get("foot_geoms") else
-                    [model.geom(n).id for n in legged["foot_geoms"]], np.int64)
+    feet = _feet(model, trunk, legged.get("foot_geoms") or [], robot and list(robot.feet))
     kind = _kinds(model, trunk, feet)
+    corners = _corners(data.geom_xpos[feet, :2], heading) if robot is None else \
+        (tuple(robot.corners) if len(feet) == 4 else None)
     foot_index = np.full(model.ngeom, -1, np.int64)
     foot_index[feet] = np.arange(len(feet))
     ending = np.zeros(model.ngeom, bool)
@@ -167,17 +186,70 @@ def build_world(kwargs: dict, render: bool = False) -> World:
         half_angle = 0.5 * math.atan2(heading[1], heading[0])  # the box's own x along the heading
         model.body_quat[step_body] = [math.cos(half_angle), 0.0, 0.0, math.sin(half_angle)]
     frame_skip = int(kwargs["frame_skip"])
-    names = tuple(model.geom(g).name or (robot.corners[i] if len(feet) == 4 else f"foot {i}")
-                  for i, g in enumerate(feet))
+    names = tuple(model.geom(g).name or (corners[i] if corners else f"foot {i}") for i, g in enumerate(feet))
     return World(model=model, robot=robot, xml_file=str(kwargs["xml_file"]), trunk=trunk, frame_skip=frame_skip,
-                 dt=float(model.opt.timestep) * frame_skip, init_qpos=np.array(robot.qpos),
+                 dt=float(model.opt.timestep) * frame_skip, init_qpos=init_qpos,
                  init_qvel=np.zeros(model.nv), heading=heading, heading_is_x=angle == 0.0,
                  init_z=float(data.xpos[trunk][2]), up0=data.xmat[trunk].reshape(3, 3)[2].copy(), act_dofs=act_dofs,
                  home_ctrl=home_ctrl, ctrl_per_action=per_action, ctrl_low=low, ctrl_high=high,
-                 torque_limit=np.array([min(t, 1e30) for t in robot.peak_torque], np.float64), feet=feet,
-                 foot_names=names, corners=tuple(robot.corners) if len(feet) == 4 else None, kind=kind,
+                 torque_limit=None if robot is None else np.array([min(t, 1e30) for t in robot.peak_torque]),
+                 feet=feet, foot_names=names, corners=corners, kind=kind,
                  foot_index=foot_index, ending_geom=ending, step_body=step_body, step_geom=step_geom,
                  contact_filter=contact_filter)
+
+
+def _plain_model(kwargs: dict, render: bool):
+    """env=mjcf's model: compiled from its file as Gymnasium's MuJoCo envs do (with a camera and drawn geoms only for
+    a rendered copy), actuators without a ctrlrange given their force range / gear (mjcf.check_mjcf)."""
+    from ppo_torchrl.mjcf import check_mjcf
+    from ppo_torchrl.tasks.locomotion.filming import add_track_camera, draw_hidden_robot
+
+    path = str(kwargs["xml_file"])
+    if render:
+        spec = mujoco.MjSpec.from_file(path)
+        draw_hidden_robot(spec)
+        add_track_camera(spec, kwargs["main_body"], heading_angle((kwargs.get("legged") or {}).get("heading", "x")))
+        model = spec.compile()
+    else:
+        model = mujoco.MjModel.from_xml_path(path)
+    from pathlib import Path
+
+    for i, low, high in check_mjcf(Path(path)).ctrl_from_force:
+        model.actuator_ctrllimited[i] = 1
+        model.actuator_ctrlrange[i] = (low, high)
+    return model
+
+
+def _feet(model, trunk: int, names, derived) -> np.ndarray:
+    """The geoms named in env.locomotion.foot_geoms, else `derived` (a robot read from its model), else the geoms
+    whose name holds 'foot', else those of the robot's bodies without child bodies."""
+    root = model.body_rootid[trunk]
+    robot = [g for g in range(model.ngeom) if model.body_rootid[model.geom_bodyid[g]] == root]
+    if names:
+        missing = [n for n in names if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, n) < 0]
+        if missing:
+            raise ConfigError(f"env.locomotion.foot_geoms: {', '.join(missing)} is not a geom of the model")
+        return np.array([model.geom(n).id for n in names], np.int64)
+    if derived:
+        return np.array(derived, np.int64)
+    feet = [g for g in robot if "foot" in model.geom(g).name.lower()]
+    if not feet:
+        parents = set(model.body_parentid[1:].tolist())
+        feet = [g for g in robot if model.geom_bodyid[g] not in parents]
+    return np.array(feet, np.int64)
+
+
+def _corners(feet_xy: np.ndarray, heading: np.ndarray) -> Optional[tuple]:
+    """Each foot's corner (left or right of the feet's centre, ahead or behind along the heading) for four feet, one
+    at each corner; else None."""
+    from ppo_torchrl.robots.gait import CORNERS
+
+    if len(feet_xy) != 4:
+        return None
+    xy = feet_xy - feet_xy.mean(axis=0)
+    ahead, left = xy @ heading, xy @ np.array([-heading[1], heading[0]])
+    corners = tuple(("L" if y > 0 else "R") + ("F" if x > 0 else "H") for x, y in zip(ahead, left))
+    return corners if sorted(corners) == sorted(CORNERS) else None
 
 
 def _drive(model, robot: Robot, action_scale: float, cap: bool) -> tuple:
