@@ -141,6 +141,12 @@ def env_checks(env_cfg) -> list:
     return legged + locomotion_checks(scaled.locomotion) + terrain_checks(scaled.get("terrain"))
 
 
+# env.locomotion's keys that are Gymnasium Ant-v5's own arguments (mjcf_kwargs passes them at the top level)
+ANT_KEYS = ("forward_reward_weight", "healthy_reward", "healthy_z_range", "terminate_when_unhealthy",
+            "ctrl_cost_weight", "contact_cost_weight", "frame_skip", "reset_noise_scale", "main_body",
+            "contact_forces_in_observation")
+
+
 def mjcf_kwargs(env_cfg) -> dict:
     """gymnasium.make kwargs that turn Ant-v5 into the locomotion env of env.xml_file."""
     if env_cfg.id not in (MJCF_ID, MJCF_ENV_ID):
@@ -166,12 +172,11 @@ def mjcf_kwargs(env_cfg) -> dict:
         raise ConfigError(f"env.locomotion.main_body={loco.main_body} is not a body of {path.name} "
                           f"(a body name, e.g. {named}, or an id in 1..{len(info.bodies) - 1})")
     kwargs = {"camera_name": TRACKING_CAMERA} if TRACKING_CAMERA in info.cameras else {}
-    from ppo_torchrl.robots.env import LEGGED_KEYS
-
     return {
         **kwargs,
-        # robots/env.py: heading, actuator limits, legged reward terms; terrain and observation extras
-        "legged": {key: _plain(loco.get(key)) for key in LEGGED_KEYS},
+        # every env.locomotion key but Ant-v5's own (below): heading, actuator limits, each reward term's weight (a
+        # new term's key reaches the task with no list to extend: tasks/locomotion/rewards.py)
+        "legged": {key: _plain(loco.get(key)) for key in loco if key not in ANT_KEYS},
         "terrain": _plain(env_cfg.get("terrain")) or {},
         "xml_file": str(path),
         "forward_reward_weight": loco.forward_reward_weight,
