@@ -37,6 +37,47 @@ class TransformsConfig:
 
 
 @dataclass
+class CommandConfig:
+    """What the robot is told to do (tasks/locomotion/commands.py). heading: walk along the heading at up to
+    env.legged.target_speed (the climb recipes'). velocity: a joystick, a commanded forward and sideways velocity in
+    the trunk's heading frame and a yaw rate, each drawn uniformly per row from its range and drawn again every
+    `resample` (a [min, max] time, drawn too), a `stand_share` of the draws all zero; given to the policy as an
+    observation segment. Ranges in the robot's units (env=legged: sqrt(g l) for speeds, sqrt(g / l) for the yaw rate,
+    sqrt(l / g) for times; robots/recipe.py turns them into SI; env=mjcf takes them in SI)."""
+
+    kind: str = "heading"  # heading | velocity
+    vx: List[float] = field(default_factory=lambda: [-0.5, 0.5])
+    vy: List[float] = field(default_factory=lambda: [-0.25, 0.25])
+    yaw: List[float] = field(default_factory=lambda: [-0.25, 0.25])
+    stand_share: float = 0.05
+    resample: List[float] = field(default_factory=lambda: [15.0, 45.0])
+    # the tracking terms' widths: exp(-error^2 / sigma), error in the units above (Playground's Go1: 0.25 (m/s)^2
+    # and 0.25 (rad/s)^2, which are ~0.06 and ~0.011 in a Go1's units)
+    sigma_lin: float = 0.06
+    sigma_yaw: float = 0.011
+
+
+@dataclass
+class RandomizeConfig:
+    """Randomized physics (tasks/locomotion/randomize.py), drawn per row at each reset from these ranges (uniform)
+    and recorded with the episode (evaluate can replay a draw). The defaults randomize nothing. In the robot's units
+    for env=legged (lengths in l, speeds in sqrt(g l), times in sqrt(l / g); robots/recipe.py turns them into SI),
+    in SI for env=mjcf; scales are dimensionless."""
+
+    friction: List[float] = field(default_factory=lambda: [1.0, 1.0])  # x every geom's friction: the grip
+    trunk_mass: List[float] = field(default_factory=lambda: [1.0, 1.0])  # x the trunk's mass and inertia
+    com: float = 0.0  # the trunk's centre of mass moved by up to this along each axis (x l)
+    strength: List[float] = field(default_factory=lambda: [1.0, 1.0])  # x every servo's gains (its torque)
+    push_speed: float = 0.0  # a push: up to this ground velocity added to the trunk (x sqrt(g l)); 0: none
+    push_interval: List[float] = field(default_factory=lambda: [5.0, 70.0])  # time between pushes (x sqrt(l / g))
+    # observation noise, a level: uniform noise of level x (0.02 on the trunk's height and attitude, 0.03 rad on the
+    # joint angles, 0.05 sqrt(g l) on its linear and 0.04 sqrt(g / l) on its angular velocity, 0.3 sqrt(g / l) on
+    # the joint speeds) on what the policy sees; 0: none
+    obs_noise: float = 0.0
+    delay_share: float = 0.0  # the share of episodes whose actions reach the drives one control step late
+
+
+@dataclass
 class LocomotionConfig:
     """An MJCF locomotion env (env=mjcf; robots/env.py): Gymnasium Ant-v5's reward and termination knobs,
     then heading, actuator limits and legged-locomotion reward terms (defaults: off, Ant-v5's behaviour)."""
@@ -110,6 +151,11 @@ class LocomotionConfig:
     # The feet (geom names), for contacts, slip, air time and gait figures; empty: the geoms whose name
     # contains "foot", else every geom of a body without child bodies.
     foot_geoms: List[str] = field(default_factory=list)
+    # What the robot is told to do (CommandConfig, in SI here; env=legged derives it from env.legged.command)
+    command: CommandConfig = field(default_factory=CommandConfig)
+    randomize: RandomizeConfig = field(default_factory=RandomizeConfig)  # in SI here (env=legged: env.legged.randomize)
+    # The weights of the named reward terms without a key of their own ({term: weight}; env=legged: env.legged.rewards)
+    rewards: Dict[str, float] = field(default_factory=dict)
 
 
 @dataclass
@@ -206,6 +252,15 @@ class LeggedConfig:
     # the curriculum showed (conf/env/legged.yaml sets it). whole: one running normalization over everything,
     # heights in world m: runs saved before the key existed (issue 59) trained so, and are evaluated so.
     obs_layout: str = "whole"
+    # step: a step across the path, its height from the curriculum in training and step_height in evaluation (the
+    # climb recipes'); flat: flat ground, no step (the joystick's)
+    terrain: str = "step"
+    command: CommandConfig = field(default_factory=CommandConfig)
+    randomize: RandomizeConfig = field(default_factory=RandomizeConfig)
+    # The weights of the named reward terms that have no key of their own (tasks/locomotion/rewards.py, e.g. the
+    # joystick's tracking_lin_vel): {term: weight}, dimensionless (each such term reads its quantity in the robot's
+    # units). A name that is not a registered term is refused.
+    rewards: Dict[str, float] = field(default_factory=dict)
 
 
 @dataclass

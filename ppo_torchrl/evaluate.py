@@ -190,6 +190,36 @@ def apply_overrides(cfg, overrides: list[str]):
 
 
 MAX_EPISODES = 10**6
+TRACKING_FILES = ("tracking.json", "tracking.md", "tracking.png")
+
+
+def tracking_eval(cfg, ac, obs_stats, args: dict, out_dir: Path, run_dir: Path, label: str) -> dict:
+    """tracking=true (tasks/locomotion/tracking.py): the fixed command set, in the nominal world and, with
+    extremes=true, at each corner of the run's randomization; tracking.json, tracking.md, tracking.png."""
+    from ppo_torchrl.envs import gym_make_kwargs
+    from ppo_torchrl.rundir import atomic_write_bytes, atomic_write_json, record
+    from ppo_torchrl.tasks.locomotion import tracking
+
+    worlds = [("nominal", None)]
+    if args["extremes"]:
+        worlds += tracking.extremes(gym_make_kwargs(cfg.env)["legged"]["randomize"])
+    results = {}
+    for name, draw in worlds:
+        results[name] = tracking.track(make_batch, cfg, ac, obs_stats, args["episodes"], args["seed"], draw)
+        o = results[name]["overall"]
+        print(f"{label}, {name}: v_xy error {o['v_xy_error']:.3f} sqrt(g l), yaw rate error {o['yaw_rate_error']:.3f} "
+              f"sqrt(g / l), falls {o['falls']:.0%} of {o['episodes']} episodes", flush=True)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    text = "".join(f"## {name}\n\n{tracking.table(r)}\n" for name, r in results.items())
+    atomic_write_json(out_dir / TRACKING_FILES[0], {"title": label, "seed": args["seed"], "worlds": results},
+                      owner=run_dir)
+    atomic_write_bytes(out_dir / TRACKING_FILES[1], lambda f: f.write(f"# {label}\n\n{text}".encode()), run_dir)
+    tracking.plot(results["nominal"], out_dir / TRACKING_FILES[2], label, run_dir)
+    record(run_dir, [out_dir / n for n in TRACKING_FILES])
+    print(tracking.table(results["nominal"]) + f"tracking: {out_dir / TRACKING_FILES[0]}, {out_dir / TRACKING_FILES[2]}")
+    return {"tracking": {name: r["overall"] for name, r in results.items()}}
+
+
 @releasing  # the shared locks it takes (locks.read) go when it ends
 def main(argv: list[str]) -> dict:
     from ppo_torchrl.checkpoint import check_same_env, check_spec, load_policy, resolve_checkpoint
@@ -218,6 +248,10 @@ def main(argv: list[str]) -> dict:
     if any(arg.startswith(("video_episodes=", "video_length=")) for arg in argv):
         args["video"] = True
     video_episodes, video_length = parse_video_choices(args["video_episodes"], args["video_length"], args["episodes"])
+    if args["extremes"] and not args["tracking"]:
+        raise ConfigError("extremes=true goes with tracking=true (a joystick run's tracking at its randomization's ends)")
+    if args["tracking"] and (heights or args["video"]):
+        raise ConfigError("tracking=true is an evaluation of its own: leave out heights= and video=")
     if heights and args["video"]:
         raise ConfigError("video=true films one evaluation, not a heights= sweep: film each height with a command of "
                           "its own, env.terrain.step_height=<m> video=true (e.g. env.terrain.step_height=0.1 video=true)")
@@ -230,7 +264,8 @@ def main(argv: list[str]) -> dict:
     if why:
         raise ConfigError(f"cannot write the eval's files in {out_dir}: {why}; give a writable dir with out=<dir>")
     video = out_dir / f"{which}.mp4"
-    writes = [out_dir / name for name in sweep.SWEEP_FILES] if heights else [out_dir / "eval.json"] + [video] * args["video"]
+    writes = [out_dir / name for name in TRACKING_FILES] if args["tracking"] else \
+        [out_dir / name for name in sweep.SWEEP_FILES] if heights else [out_dir / "eval.json"] + [video] * args["video"]
     check_replaceable(run_dir, writes)  # a file there that the app did not write is left alone: one line
     read(holder(out_dir))  # out= in another run dir: that one is read (and written) too
     cfg, ac, state = load_policy(run_dir, str(checkpoint))
@@ -244,6 +279,8 @@ def main(argv: list[str]) -> dict:
         check_spec(state, env_spec(cfg.env), cfg.env.id)
     obs_stats = state["normalization"]["obs"]
     label = f"{env_label(cfg.env)} @ {state['frames']} frames ({which})"
+    if args["tracking"]:
+        return tracking_eval(cfg, ac, obs_stats, args, out_dir, run_dir, label)
     if heights:
         heights = sweep.heights_in_metres(heights, cfg.env)
         rows = sweep.height_sweep(cfg, ac, obs_stats, heights, args["episodes"], args["seed"], out_dir,

@@ -10,7 +10,8 @@ import sys
 
 def _evaluate():
     usage = ("python -m ppo_torchrl.evaluate run=<run dir> [checkpoint=best|last|<file>] [episodes=10] [video=false] "
-             "[video_episodes=0] [video_length=<s>] [seed=0] [heights=<m,m,...> [out=<dir>]] [env.<key>=<value> ...]")
+             "[video_episodes=0] [video_length=<s>] [seed=0] [heights=<m,m,...> [out=<dir>]] [tracking=false [extremes=false]] "
+             "[env.<key>=<value> ...]")
     help = {
         "run": "the run dir to evaluate (one with checkpoints/), or latest, or latest/<env>: the newest run under outputs/",
         "checkpoint": "best, last, or a checkpoint file",
@@ -26,6 +27,10 @@ def _evaluate():
                    "evaluate at each; writes height_sweep.csv and the success-rate curve height_sweep.png (to film "
                    "one height: env.terrain.step_height=<m> video=true)",
         "out": "where the eval writes its files: eval.json, the video, a height sweep's (empty: <run dir>/eval)",
+        "tracking": "a joystick run (env.legged.command.kind=velocity): `episodes` episodes per command of a fixed set, "
+                    "each held; writes tracking.json, tracking.md and tracking.png (tasks/locomotion/tracking.py)",
+        "extremes": "with tracking=true, the same once per corner of the run's randomization (grip, trunk mass, "
+                    "strength at their ends)",
     }
     about = ("Runs the policy deterministically on a fresh env with the run's frozen normalization stats, prints\n"
              "mean +- std return and length (MJCF robots: forward velocity, gait figures; step envs: the share of\n"
@@ -33,7 +38,7 @@ def _evaluate():
              "env.<key>=<value> changes the run's env config for this evaluation, e.g. env.terrain.step_height=0.1\n"
              "(a step height in m) or env.xml_file=quadruped_step.xml (a flat-ground run on the step).")
     spec = {"run": None, "checkpoint": "best", "episodes": 10, "video": False, "video_episodes": "0",
-            "video_length": "", "seed": 0, "heights": "", "out": ""}
+            "video_length": "", "seed": 0, "heights": "", "out": "", "tracking": False, "extremes": False}
     return usage, spec, help, about
 
 

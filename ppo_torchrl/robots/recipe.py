@@ -16,6 +16,7 @@ height sweep sets it).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 from omegaconf import OmegaConf
@@ -34,7 +35,8 @@ DERIVED = {
                    "torque_cost_weight": "torque_cost_weight", "joint_speed_cost_weight": "joint_speed_cost_weight",
                    "foot_slip_cost_weight": "foot_slip_cost_weight", "base_height_target": None,
                    "base_height_cost_weight": "base_height_cost_weight", "terminate_on_contact": None,
-                   "foot_geoms": None, "friction_scale": "friction_scale", "trunk_mass_scale": "trunk_mass_scale"},
+                   "foot_geoms": None, "friction_scale": "friction_scale", "trunk_mass_scale": "trunk_mass_scale",
+                   "command": "command", "rewards": "rewards", "randomize": "randomize"},
     "terrain": {"eval_step_height": "step_height", "step_height_range": "step_height_range",
                 "curriculum_step": "curriculum_step", "curriculum_band": "curriculum_band",
                 "step_distance": "step_distance", "success_margin": "success_margin",
@@ -106,6 +108,9 @@ def derived_values(robot: Robot, legged) -> dict:
             "terminate_on_contact": [robot.trunk],
             "friction_scale": legged.get("friction_scale", 1.0),
             "trunk_mass_scale": legged.get("trunk_mass_scale", 1.0),
+            "command": command_si(legged.get("command") or _default_command(), speed, time),
+            "rewards": dict(legged.get("rewards") or {}),
+            "randomize": randomize_si(legged.get("randomize"), l, speed, time),
         },
         "terrain": {
             "eval_step_height": in_metres(legged.step_height, l),
@@ -117,6 +122,31 @@ def derived_values(robot: Robot, legged) -> dict:
             "height_sample_spacing": legged.height_sample_spacing * l,
         },
     }
+
+
+def _default_command():
+    from ppo_torchrl.config import CommandConfig  # a saved config from before the key: the heading command
+
+    return CommandConfig()
+
+
+def command_si(command, speed: float, time: float) -> dict:
+    """env.legged.command (speeds in sqrt(g l), the yaw rate in sqrt(g / l), times in sqrt(l / g)) in SI."""
+    get = command.get if hasattr(command, "get") else lambda k, d=None: getattr(command, k, d)
+    return {"kind": get("kind", "heading"), "vx": [v * speed for v in get("vx")], "vy": [v * speed for v in get("vy")],
+            "yaw": [w / time for w in get("yaw")], "stand_share": float(get("stand_share")),
+            "resample": [t * time for t in get("resample")], "sigma_lin": float(get("sigma_lin")) * speed ** 2,
+            "sigma_yaw": float(get("sigma_yaw")) / time ** 2}
+
+
+def randomize_si(randomize, l: float, speed: float, time: float) -> dict:
+    """env.legged.randomize (robot units) in SI; None (a saved config from before the key): nothing randomized."""
+    from ppo_torchrl.config import RandomizeConfig
+
+    r = dataclasses.asdict(RandomizeConfig()) if randomize is None else (
+        OmegaConf.to_container(randomize) if OmegaConf.is_config(randomize) else dict(randomize))
+    return {**r, "com": float(r["com"]) * l, "push_speed": float(r["push_speed"]) * speed,
+            "push_interval": [t * time for t in r["push_interval"]]}
 
 
 def describe(robot: Robot, legged) -> str:
@@ -144,15 +174,24 @@ def scaled_env(env_cfg, robot: Robot):
         for key, source in keys.items():
             given = env_cfg[group].get(key)
             given = OmegaConf.to_container(given) if OmegaConf.is_config(given) else given
-            if given != getattr(defaults[group], key):
+            default = getattr(defaults[group], key)
+            default = dataclasses.asdict(default) if dataclasses.is_dataclass(default) else default
+            if given != default:
                 where = f"env.legged.{source}" if source else "the robot's model"
                 raise ConfigError(f"env.{group}.{key}={given}: env=legged derives it from {where} (robots/recipe.py); "
                                   f"leave env.{group}.{key} unset" + (f" and set {where}" if source else ""))
     scaled = OmegaConf.create(OmegaConf.to_container(env_cfg))
+    flat = env_cfg.legged.get("terrain", TERRAINS[0]) == "flat"
     for group, values in derived_values(robot, env_cfg.legged).items():
+        if group == "terrain" and flat:  # flat ground: no step, no curriculum, nothing of the step derived
+            scaled.terrain.curriculum = False
+            continue
         for key, value in values.items():
             scaled[group][key] = value
     return scaled
+
+
+TERRAINS = ("step", "flat")  # env.legged.terrain: a step across the path (the climb recipes'), or flat ground
 
 
 def legged_checks(legged) -> list:
@@ -177,6 +216,8 @@ def legged_checks(legged) -> list:
                                 and abs(legged.control_dt / seconds - round(legged.control_dt / seconds)) < 1e-6)
     checks.append((whole, f"env.legged.physics_dt={dt} must be rule, model or a step in seconds that divides "
                           f"env.legged.control_dt={legged.control_dt} into whole steps"))
+    terrain = legged.get("terrain", TERRAINS[0])
+    checks.append((terrain in TERRAINS, f"env.legged.terrain={terrain} is not known; use " + " or ".join(TERRAINS)))
     obs_layout = legged.get("obs_layout", OBS_LAYOUTS[0])
     checks.append((obs_layout in OBS_LAYOUTS, f"env.legged.obs_layout={obs_layout} is not known; use "
                    + " or ".join(OBS_LAYOUTS) + " (layout.py)"))

@@ -146,11 +146,18 @@ class LeggedBatchEnv(gym.vector.VectorEnv):
         task, m = self.task, self.task.memory
         xy_before = self.reading.xpos[:, self.world.trunk, :2].copy()
         start = time.perf_counter()
-        self._physics(self.world.ctrl_of(actions.astype(np.float64)))
+        rand = task.randomize
+        applied = actions.astype(np.float64)
+        if rand.delayed.any():  # those rows' drives get the last step's action; this one waits a step
+            late = applied.copy()
+            applied[rand.delayed] = m.late_action[rand.delayed]
+            m.late_action[:] = late
+        rand.push(self.datas, self.rngs)
+        self._physics(self.world.ctrl_of(applied))
         physics = time.perf_counter()
         for i in range(self.num_envs):  # in this thread: Python, which holds the GIL anyway
             self._gather(i)
-        reward, terminated = task.step(actions, self.reading, xy_before)
+        reward, terminated = task.step(actions, self.reading, xy_before, self.rngs)
         m.elapsed += 1
         truncated = m.elapsed >= self.max_steps
         m.returns += reward
@@ -158,7 +165,7 @@ class LeggedBatchEnv(gym.vector.VectorEnv):
         done = terminated | truncated
         if done.any():
             m.last_term_sums[done] = m.term_sums[done]
-        self.last_obs = task.observe(self.reading)
+        self.last_obs = rand.noisy(task.observe(self.reading), self.rngs, slice(None))
         if self.timing is not None:
             self.timing["physics"] += physics - start
             self.timing["task"] += time.perf_counter() - physics
@@ -196,6 +203,7 @@ class LeggedBatchEnv(gym.vector.VectorEnv):
         mujoco.mj_resetData(model, d)
         task.terrain.draw(i, rng, model)
         task.command.resample(i, rng)
+        task.randomize.draw(i, rng, model)
         m.reset_row(i)
         task.ending[i], task.ending_body[i] = 0, None
         if self.gait is not None:
@@ -206,7 +214,7 @@ class LeggedBatchEnv(gym.vector.VectorEnv):
         mujoco.mj_forward(model, d)
         self._gather(i)
         m.prev_feet_xy[i] = self.reading.feet_xy[i]
-        self.last_obs[i] = task.observe(self.reading, slice(i, i + 1))[0]
+        self.last_obs[i] = task.randomize.noisy(task.observe(self.reading, slice(i, i + 1)), self.rngs, slice(i, i + 1))[0]
         return self.last_obs[i]
 
     # ---------------------------------------------------------------- positions (EnvState saves them)
@@ -216,7 +224,8 @@ class LeggedBatchEnv(gym.vector.VectorEnv):
         physics = np.empty(mujoco.mj_stateSize(model, STATE))
         mujoco.mj_getState(model, d, physics, STATE)
         extra = {"memory": m.row(i), "terrain": self.task.terrain.row_state(i),
-                 "command": self.task.command.row_state(i), "xpos": d.xpos.copy()}
+                 "command": self.task.command.row_state(i), "randomize": self.task.randomize.row_state(i),
+                 "xpos": d.xpos.copy()}
         return {"env": {"np_random": self.rngs[i].bit_generator.state, "extra": extra,
                         "elapsed_steps": int(m.elapsed[i]), "episode": (float(m.returns[i]), int(m.lengths[i])),
                         "mujoco": physics},
@@ -236,6 +245,7 @@ class LeggedBatchEnv(gym.vector.VectorEnv):
         extra = state["extra"]
         self.task.terrain.set_row_state(i, extra["terrain"], model)
         self.task.command.set_row_state(i, extra["command"])
+        self.task.randomize.set_row_state(i, extra.get("randomize"), model)
         mujoco.mj_forward(model, d)
         memory = dict(extra["memory"])
         self.task.memory.set_row(i, memory)

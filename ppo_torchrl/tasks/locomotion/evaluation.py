@@ -50,9 +50,6 @@ def task_episodes(make_batch, cfg, ac, obs_stats: Optional[dict], seeds: Sequenc
     """evaluate.run_episodes for a legged task (module doc): one episode per seed, the same record. make_batch:
     envs.make_batch (the batch of the task's config)."""
     from ppo_torchrl.filming import VIDEO_SIZE, EpisodeProgress, Filming
-    from ppo_torchrl.models import NumpyPolicy
-    from ppo_torchrl.normalization import make_observation_normalizer
-
     episodes = len(seeds)
     rows = 1 if video_path is not None else max(1, min(episodes, MAX_ROWS))
     render = {"render_mode": "rgb_array", "width": VIDEO_SIZE[0], "height": VIDEO_SIZE[1]} if video_path else {}
@@ -60,35 +57,7 @@ def task_episodes(make_batch, cfg, ac, obs_stats: Optional[dict], seeds: Sequenc
     world, task = batch.world, batch.task
     batch.spec = _Spec(batch.max_steps)
     batch.gait = GaitBatch(rows, world, cfg.env.locomotion.get("joint_speed_limit"))
-    t = cfg.env.transforms
-    norm = make_observation_normalizer(t, task.obs_dim, obs_stats, frozen=True, layout=batch.observation_layout())
-    if obs_stats is None:
-        norm.enabled = False
-    if ac.action_low.device.type != "cpu":
-        import copy
-
-        ac = copy.deepcopy(ac)
-        ac.actor.cpu()
-        ac.action_low, ac.action_high = ac.action_low.cpu(), ac.action_high.cpu()
-    if deterministic:  # what a one-env evaluation's TorchRL env and actor compute, so its episodes to the bit
-        from tensordict import TensorDict
-
-        from ppo_torchrl.models import deterministic_policy
-
-        actor = deterministic_policy(ac)
-        low, high = ac.action_low.numpy(), ac.action_high.numpy()
-
-        def act(obs):  # row by row: a batched matmul rounds otherwise, and an episode would depend on its row count
-            normalized = torch.from_numpy(norm(obs, update=False))
-            out = [actor(TensorDict({"observation": normalized[i:i + 1]}, batch_size=[1]))["action"] for i in range(rows)]
-            action = torch.cat(out).numpy()
-            return np.clip(action, low, high) if ac.head == "normal" else action
-    else:
-        sampler, rng = NumpyPolicy.from_actor(ac.actor), np.random.default_rng(int(seeds[0]) if len(seeds) else 0)
-        sampler.sync()
-
-        def act(obs):
-            return sampler.act(norm(obs), rng.standard_normal((rows, world.model.nu), dtype=np.float32))[1]
+    act = eval_policy(cfg, ac, obs_stats, batch, rows, deterministic, int(seeds[0]) if len(seeds) else 0)
     film = (Filming(video_path, batch, [e for e in video_episodes if 0 <= e < episodes], video_length)
             if video_path is not None else None)
     record = {k: [None] * episodes for k in ("returns", "lengths", "distances", "gaits", "crossed", "heights",
@@ -154,6 +123,45 @@ def task_episodes(make_batch, cfg, ac, obs_stats: Optional[dict], seeds: Sequenc
             "success_margin": task.terrain.success_margin if has_step and episodes else None, "video": video,
             "terminated": record["terminated"], "ends": record["ends"], "seeds": list(seeds),
             "feet": tuple(world.foot_names), "figures": "locomotion"}
+
+
+def eval_policy(cfg, ac, obs_stats: Optional[dict], batch, rows: int, deterministic: bool, seed: int = 0):
+    """The evaluation's policy for `rows` rows of `batch`: raw observations in, actions out, on frozen statistics;
+    deterministic: as a one-env evaluation's TorchRL env and actor compute it (row by row)."""
+    from ppo_torchrl.models import NumpyPolicy
+    from ppo_torchrl.normalization import make_observation_normalizer
+
+    world, task = batch.world, batch.task
+    t = cfg.env.transforms
+    norm = make_observation_normalizer(t, task.obs_dim, obs_stats, frozen=True, layout=batch.observation_layout())
+    if obs_stats is None:
+        norm.enabled = False
+    if ac.action_low.device.type != "cpu":
+        import copy
+
+        ac = copy.deepcopy(ac)
+        ac.actor.cpu()
+        ac.action_low, ac.action_high = ac.action_low.cpu(), ac.action_high.cpu()
+    if deterministic:  # what a one-env evaluation's TorchRL env and actor compute, so its episodes to the bit
+        from tensordict import TensorDict
+
+        from ppo_torchrl.models import deterministic_policy
+
+        actor = deterministic_policy(ac)
+        low, high = ac.action_low.numpy(), ac.action_high.numpy()
+
+        def act(obs):  # row by row: a batched matmul rounds otherwise, and an episode would depend on its row count
+            normalized = torch.from_numpy(norm(obs, update=False))
+            out = [actor(TensorDict({"observation": normalized[i:i + 1]}, batch_size=[1]))["action"] for i in range(rows)]
+            action = torch.cat(out).numpy()
+            return np.clip(action, low, high) if ac.head == "normal" else action
+    else:
+        sampler, rng = NumpyPolicy.from_actor(ac.actor), np.random.default_rng(seed)
+        sampler.sync()
+
+        def act(obs):
+            return sampler.act(norm(obs), rng.standard_normal((rows, world.model.nu), dtype=np.float32))[1]
+    return act
 
 
 def _record(record: dict, e: int, batch, i: int, start_xy, terminated: bool) -> None:

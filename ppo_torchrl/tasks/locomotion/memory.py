@@ -12,6 +12,7 @@ import numpy as np
 @dataclass
 class EpisodeMemory:
     prev_action: np.ndarray  # [N, nu] the last action (action rate)
+    late_action: np.ndarray  # [N, nu] the action a delayed row's drives get at the next step (randomize.py)
     air_time: np.ndarray  # [N, F] s each foot has been off the ground (air time, long swing)
     prev_contact: np.ndarray  # [N, F] each foot's contact at the last control step
     prev_feet_xy: np.ndarray  # [N, F, 2] each foot's position then (foot slip)
@@ -26,7 +27,7 @@ class EpisodeMemory:
 
     @staticmethod
     def zeros(n: int, nu: int, feet: int, terms: int) -> "EpisodeMemory":
-        return EpisodeMemory(prev_action=np.zeros((n, nu)), air_time=np.zeros((n, feet)),
+        return EpisodeMemory(prev_action=np.zeros((n, nu)), late_action=np.zeros((n, nu)), air_time=np.zeros((n, feet)),
                              prev_contact=np.zeros((n, feet), bool), prev_feet_xy=np.zeros((n, feet, 2)),
                              clock_steps=np.zeros(n, np.int64), stepped=np.zeros(n, bool), moving=np.zeros(n, bool),
                              elapsed=np.zeros(n, np.int64), returns=np.zeros(n), lengths=np.zeros(n, np.int64),

@@ -37,13 +37,21 @@ class Step:
     body_contacts: Optional[np.ndarray]  # [N] non-foot geoms on the ground
     on_face: Optional[np.ndarray]  # [N, F] feet on an upright face
     meant_down: Optional[np.ndarray]  # [N, F] the trot clock's schedule for this step
-    params: dict  # the task's constants: dt, healthy_reward, speed limits, targets
+    command: np.ndarray  # [N, 3] a velocity command's (vx, vy, yaw rate) in SI; zeros for the heading command
+    velocity: np.ndarray  # [N, 2] the trunk's ground velocity in its heading frame (m/s)
+    yaw_rate: np.ndarray  # [N] rad/s, about the world's vertical
+    vz: np.ndarray  # [N] the trunk's vertical speed
+    tilt_rate: np.ndarray  # [N, 2] its roll and pitch rates (the world's x and y components of its angular velocity)
+    joint_angle: np.ndarray  # [N, na] the actuated joints' angles
+    params: dict  # the task's constants: dt, healthy_reward, speed limits, targets, speed and time scales, sigmas
 
 
 @dataclass(frozen=True)
 class Term:
     name: str
-    weight_key: str  # in the env's keyword arguments (top level: Ant-v5's; else env.locomotion's legged keys)
+    # in the env's keyword arguments (top level: Ant-v5's; else env.locomotion's legged keys); None: the term's
+    # weight is env.locomotion.rewards.<name> (env=legged: env.legged.rewards.<name>), dimensionless
+    weight_key: Optional[str]
     fn: Callable[[Step], np.ndarray]
     needs: tuple = ()  # "contacts", "faces", "peak", "cfrc", "clock"
     base: bool = False  # one of Ant-v5's four
@@ -52,7 +60,7 @@ class Term:
 TERMS: Dict[str, Term] = {}
 
 
-def term(name: str, weight_key: str, needs: tuple = (), base: bool = False):
+def term(name: str, weight_key: Optional[str] = None, needs: tuple = (), base: bool = False):
     def register(fn):
         TERMS[name] = Term(name, weight_key, fn, needs, base)
         return fn
@@ -143,3 +151,32 @@ def long_swing(s: Step) -> np.ndarray:
 @term("gait_clock", "gait_clock_weight", needs=("contacts", "clock"))
 def gait_clock(s: Step) -> np.ndarray:
     return np.count_nonzero(s.feet == s.meant_down, axis=1) / s.feet.shape[1]
+
+
+# ---------------------------------------------------------------- the joystick's (velocity command), weights in rewards
+@term("tracking_lin_vel")
+def tracking_lin_vel(s: Step) -> np.ndarray:
+    """exp(-|v_xy - command_xy|^2 / sigma): the trunk's ground velocity in its heading frame against the command."""
+    return np.exp(-np.square(s.velocity - s.command[:, :2]).sum(axis=1) / s.params["sigma_lin"])
+
+
+@term("tracking_ang_vel")
+def tracking_ang_vel(s: Step) -> np.ndarray:
+    return np.exp(-np.square(s.yaw_rate - s.command[:, 2]) / s.params["sigma_yaw"])
+
+
+@term("lin_vel_z")
+def lin_vel_z(s: Step) -> np.ndarray:
+    return -np.square(s.vz / s.params["speed"])
+
+
+@term("ang_vel_xy")
+def ang_vel_xy(s: Step) -> np.ndarray:
+    return -np.square(s.tilt_rate * s.params["time"]).sum(axis=1)
+
+
+@term("stand_still")
+def stand_still(s: Step) -> np.ndarray:
+    """- sum |joint angle - standing angle| (rad) while the command is zero."""
+    still = ~np.any(s.command != 0.0, axis=1)
+    return -np.abs(s.joint_angle - s.params["home_angle"]).sum(axis=1) * still

@@ -20,8 +20,9 @@ import numpy as np
 from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.layout import ObservationLayout, Segment
 from ppo_torchrl.robots.gait import FOOT_PAIRS, MOVING_SPEED
-from ppo_torchrl.tasks.locomotion.commands import HeadingCommand
+from ppo_torchrl.tasks.locomotion.commands import make_command
 from ppo_torchrl.tasks.locomotion.memory import EpisodeMemory
+from ppo_torchrl.tasks.locomotion.randomize import Randomization
 from ppo_torchrl.tasks.locomotion.rewards import TERMS, Step
 from ppo_torchrl.tasks.locomotion.sensors import Contacts
 from ppo_torchrl.tasks.locomotion.terrain import ground_under, make_terrain
@@ -49,8 +50,15 @@ class LeggedTask:
         legged, terrain = dict(kwargs.get("legged") or {}), dict(kwargs.get("terrain") or {})
         self.n, self.world = n, world
         self.terrain = make_terrain(n, world, terrain, evaluation)
-        self.command = HeadingCommand(n, world, legged.get("target_speed"))
-        weights = {name: float((kwargs if t.base else legged).get(t.weight_key) or 0.0) for name, t in TERMS.items()}
+        self.command = make_command(n, world, legged, world.dt)
+        self.randomize = Randomization(n, world, legged.get("randomize"), evaluation)
+        named = dict(legged.get("rewards") or {})
+        unknown = sorted(set(named) - {name for name, t in TERMS.items() if t.weight_key is None})
+        if unknown:
+            raise ConfigError(f"env.legged.rewards.{unknown[0]}: no such reward term; the terms weighted there: "
+                              + ", ".join(name for name, t in TERMS.items() if t.weight_key is None))
+        weights = {name: float(named.get(name, 0.0) if t.weight_key is None else
+                               (kwargs if t.base else legged).get(t.weight_key) or 0.0) for name, t in TERMS.items()}
         self.terms = [TERMS[name] for name in TERMS if TERMS[name].base or weights[name]]
         self.weights = np.array([weights[t.name] for t in self.terms])
         self.names = [t.name for t in self.terms]
@@ -81,7 +89,12 @@ class LeggedTask:
         self.positive_only = bool(legged.get("only_positive_rewards"))
         self.noise = float(kwargs.get("reset_noise_scale", 0.1))
         target = legged.get("base_height_target")
+        command = legged.get("command") or {}
+        robot = world.robot
         self.params = {"dt": world.dt, "healthy_reward": weights["survive"],
+                       "speed": robot.speed_scale if robot else 1.0, "time": robot.time_scale if robot else 1.0,
+                       "sigma_lin": float(command.get("sigma_lin", 0.25)), "sigma_yaw": float(command.get("sigma_yaw", 0.25)),
+                       "home_angle": world.init_qpos[world.act_qpos],
                        "joint_speed_limit": legged.get("joint_speed_limit"),
                        "base_height_target": world.init_z if target is None else float(target),
                        "feet_air_time_target": float(legged.get("feet_air_time_target", 0.5)),
@@ -92,6 +105,7 @@ class LeggedTask:
         self.ending_body: List[Optional[str]] = [None] * n
         self.progress = np.zeros(n)  # the last step's velocity along the heading
         self.last_terms = np.zeros((n, len(self.terms)))  # the last step's signed, weighted terms
+        self._no_command = np.zeros((n, 3))
         nq, nv = model.nq, model.nv
         self.obs_dim = (nq - 2 + nv + (model.nbody - 1) * 6 * self.include_cfrc + len(world.feet) * self.observe_contacts
                         + self.height_samples + self.command.size + 2 * (self.period is not None))
@@ -135,13 +149,14 @@ class LeggedTask:
         parts = (Segment.running("proprioception", self.obs_dim - feet - self.height_samples - self.command.size - clock),
                  Segment.none("foot_contacts", feet),
                  Segment.fixed("terrain_heights", self.height_samples, -robot.height, robot.leg_length, HEIGHT_CLIP),
-                 Segment.running("command", self.command.size),
+                 Segment.none("command", self.command.size),
                  Segment.none("clock", clock))
         return ObservationLayout(tuple(p for p in parts if p.size))
 
     # ---------------------------------------------------------------- one control step
-    def step(self, actions: np.ndarray, r: Reading, xy_before: np.ndarray) -> tuple:
-        """(reward [N], terminated [N]) of the control step the physics just took, the memory moved on."""
+    def step(self, actions: np.ndarray, r: Reading, xy_before: np.ndarray, rngs: list) -> tuple:
+        """(reward [N], terminated [N]) of the control step the physics just took, the memory moved on (rngs: each
+        row's, for a command drawn again)."""
         w, m, c = self.world, self.memory, self.contacts
         velocity = (r.xpos[:, w.trunk, :2] - xy_before) / w.dt
         self.progress = self.command.progress(velocity)
@@ -155,7 +170,9 @@ class LeggedTask:
                  joint_speed=r.qvel[:, w.act_dofs], step_peak=r.step_peak, height=trunk[:, 2] - ground,
                  up=r.trunk_xmat[:, 6:9] @ w.up0, feet=c.feet if self.needs_contacts else None,
                  feet_xy=r.feet_xy, prev_feet_xy=m.prev_feet_xy, air_time=m.air_time,
-                 body_contacts=c.body, on_face=c.on_face, meant_down=self.meant_down(), params=self.params)
+                 body_contacts=c.body, on_face=c.on_face, meant_down=self.meant_down(),
+                 command=self.command.value if self.command.size else self._no_command, **self.motion(r),
+                 params=self.params)
         values = np.stack([t.fn(s) for t in self.terms], axis=1) * self.weights  # signed, weighted: [N, T]
         self.last_terms = values
         reward = (values[:, 0] + values[:, 1]) + (values[:, 2] + values[:, 3])  # Ant-v5's (forward, survive, ctrl, contact)
@@ -173,12 +190,24 @@ class LeggedTask:
             m.prev_feet_xy[:] = r.feet_xy
         m.clock_steps += 1
         m.term_sums += values
+        self.command.tick(rngs)  # the next observation shows the command the next step is paid for
         # why an episode ends here: a terminate_on_contact body on the ground first, then the health check's reason
         contact = c.ending >= 0 if c.any_ending else np.zeros(self.n, bool)
         self.ending[:] = np.where(contact, -1, unhealthy if self.terminate_unhealthy else 0)
         for i in np.flatnonzero(contact):
             self.ending_body[i] = w.model.body(w.model.geom_bodyid[c.ending[i]]).name
         return reward, self.ending != 0
+
+    def motion(self, r: Reading) -> dict:
+        """The trunk's motion the joystick's terms and tracking read: ground velocity in its heading frame, yaw rate,
+        vertical speed, roll and pitch rates (a free joint's qvel: world linear, body angular), the joint angles."""
+        xmat = r.trunk_xmat
+        yaw = np.arctan2(xmat[:, 3], xmat[:, 0])
+        c, s = np.cos(yaw), np.sin(yaw)
+        vx, vy = r.qvel[:, 0], r.qvel[:, 1]
+        omega = np.einsum("nij,nj->ni", xmat.reshape(-1, 3, 3), r.qvel[:, 3:6])  # to the world frame
+        return {"velocity": np.stack([c * vx + s * vy, -s * vx + c * vy], axis=1), "yaw_rate": omega[:, 2],
+                "vz": r.qvel[:, 2], "tilt_rate": omega[:, :2], "joint_angle": r.qpos[:, self.world.act_qpos]}
 
     def _unhealthy(self, r: Reading) -> np.ndarray:
         """[N] ENDINGS code of the health check: fall (the trunk's z under healthy_z_range, above the terrain with

@@ -61,6 +61,7 @@ class World:
     init_z: float  # the trunk's height at the standing pose
     up0: np.ndarray  # world up in the trunk's frame at the standing pose
     act_dofs: np.ndarray  # the actuated joints' dofs
+    act_qpos: np.ndarray  # their qpos addresses
     home_ctrl: np.ndarray  # per actuator: the control at the standing pose
     ctrl_per_action: np.ndarray  # per actuator: the control a full action adds
     ctrl_low: np.ndarray
@@ -164,6 +165,8 @@ def build_world(kwargs: dict, render: bool = False) -> World:
     else:
         heading = np.array([math.cos(math.radians(angle)), math.sin(math.radians(angle))])
     act_dofs = _actuators(model, legged)
+    act_qpos = np.array([model.jnt_qposadr[model.actuator_trnid[a, 0]] for a in range(model.nu)
+                         if model.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT], np.int64)
     feet = _feet(model, trunk, legged.get("foot_geoms") or [], robot and list(robot.feet))
     kind = _kinds(model, trunk, feet)
     corners = _corners(data.geom_xpos[feet, :2], heading) if robot is None else \
@@ -191,6 +194,7 @@ def build_world(kwargs: dict, render: bool = False) -> World:
                  dt=float(model.opt.timestep) * frame_skip, init_qpos=init_qpos,
                  init_qvel=np.zeros(model.nv), heading=heading, heading_is_x=angle == 0.0,
                  init_z=float(data.xpos[trunk][2]), up0=data.xmat[trunk].reshape(3, 3)[2].copy(), act_dofs=act_dofs,
+                 act_qpos=act_qpos,
                  home_ctrl=home_ctrl, ctrl_per_action=per_action, ctrl_low=low, ctrl_high=high,
                  torque_limit=None if robot is None else np.array([min(t, 1e30) for t in robot.peak_torque]),
                  feet=feet, foot_names=names, corners=corners, kind=kind,

@@ -1,0 +1,131 @@
+"""The joystick (issue 73) on the batched legged env: velocity commands drawn and drawn again from the row's own RNG,
+the command as an observation segment, each new reward term on a crafted state, randomized worlds recorded and
+replayed, and the tracking figures on a robot that stands still (whose error is the command itself)."""
+
+import numpy as np
+import pytest
+
+from ppo_torchrl.envs import gym_make_kwargs
+from ppo_torchrl.tasks.locomotion.batch import LeggedBatchEnv
+from ppo_torchrl.tasks.locomotion.rewards import TERMS, Step
+
+from conftest import compose_config
+
+GO1 = "menagerie/unitree_go1/scene.xml"
+
+
+def joystick(*overrides):
+    return compose_config(["experiment=legged_joystick", f"env.xml_file={GO1}", *overrides])
+
+
+def test_commands_are_drawn_in_the_robots_units_and_drawn_again_within_an_episode():
+    cfg = joystick("env.legged.command.resample=[2.0,2.0]", "env.legged.command.stand_share=0.0")
+    batch = LeggedBatchEnv(gym_make_kwargs(cfg.env), num_envs=4, threads=1)
+    batch.reset(seed=3)
+    robot, command = batch.world.robot, batch.task.command
+    first = command.value.copy()
+    limits = np.array([0.5 * robot.speed_scale, 0.25 * robot.speed_scale, 0.25 / robot.time_scale])
+    assert (np.abs(first) <= limits).all() and len({tuple(r) for r in first}) == 4  # each row its own draw
+    # the command is the observation's segment before the clock, in the robot's units
+    layout = batch.observation_layout()
+    segment = layout.where("command")
+    np.testing.assert_allclose(batch.last_obs[:, segment], first / [robot.speed_scale, robot.speed_scale,
+                                                                    1 / robot.time_scale])
+    steps = round(2.0 * robot.time_scale / batch.world.dt)
+    for _ in range(steps - 1):
+        batch.step(np.zeros((4, 12), np.float32))
+    assert np.array_equal(command.value, first)  # held until its time is up
+    batch.step(np.zeros((4, 12), np.float32))
+    assert not np.any(np.all(command.value == first, axis=1))  # then every row draws again
+    again = LeggedBatchEnv(gym_make_kwargs(cfg.env), num_envs=4, threads=1)
+    again.reset(seed=3)
+    assert np.array_equal(again.task.command.value, first)  # from the row's seed
+    standing = LeggedBatchEnv(gym_make_kwargs(joystick("env.legged.command.stand_share=1.0").env), num_envs=3)
+    standing.reset(seed=1)
+    assert not standing.task.command.value.any()
+
+
+def crafted(**given):
+    n = 2
+    base = dict(action=np.zeros((n, 12)), prev_action=np.zeros((n, 12)), speed=np.zeros(n), healthy=np.ones(n, bool),
+                cfrc_ext=None, actuator_force=np.zeros((n, 12)), joint_speed=np.zeros((n, 12)), step_peak=None,
+                height=np.zeros(n), up=np.ones(n), feet=None, feet_xy=None, prev_feet_xy=None, air_time=None,
+                body_contacts=None, on_face=None, meant_down=None, command=np.zeros((n, 3)),
+                velocity=np.zeros((n, 2)), yaw_rate=np.zeros(n), vz=np.zeros(n), tilt_rate=np.zeros((n, 2)),
+                joint_angle=np.zeros((n, 12)),
+                params={"sigma_lin": 0.25, "sigma_yaw": 0.25, "speed": 2.0, "time": 0.2, "home_angle": np.zeros(12)})
+    base.update(given)
+    return Step(**base)
+
+
+def test_each_joystick_term_on_a_crafted_state():
+    on_target = crafted(command=np.array([[1.0, 0.5, 0.3], [1.0, 0.5, 0.3]]),
+                        velocity=np.array([[1.0, 0.5], [0.5, 0.5]]), yaw_rate=np.array([0.3, 0.8]))
+    lin = TERMS["tracking_lin_vel"].fn(on_target)
+    assert lin[0] == 1.0 and lin[1] == pytest.approx(np.exp(-0.25 / 0.25))
+    yaw = TERMS["tracking_ang_vel"].fn(on_target)
+    assert yaw[0] == 1.0 and yaw[1] == pytest.approx(np.exp(-0.25 / 0.25))
+    assert TERMS["lin_vel_z"].fn(crafted(vz=np.array([0.0, 1.0])))[1] == pytest.approx(-(1.0 / 2.0) ** 2)
+    assert TERMS["ang_vel_xy"].fn(crafted(tilt_rate=np.array([[0, 0], [3.0, 4.0]])))[1] == pytest.approx(-25 * 0.04)
+    still = crafted(command=np.array([[0.0, 0, 0], [0.2, 0, 0]]), joint_angle=np.full((2, 12), 0.1))
+    assert TERMS["stand_still"].fn(still).tolist() == pytest.approx([-1.2, 0.0])  # only while told to stand
+    assert all(TERMS[name].weight_key is None for name in ("tracking_lin_vel", "tracking_ang_vel", "stand_still"))
+
+
+def test_an_unknown_reward_name_is_one_line():
+    from ppo_torchrl.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="env.legged.rewards.tracking_speed: no such reward term"):
+        LeggedBatchEnv(gym_make_kwargs(joystick("+env.legged.rewards.tracking_speed=1.0").env))
+
+
+def test_randomized_worlds_are_drawn_per_row_recorded_and_replayed():
+    cfg = joystick()
+    batch = LeggedBatchEnv(gym_make_kwargs(cfg.env), num_envs=3, threads=1)
+    batch.reset(seed=11)
+    rand, models = batch.task.randomize, batch.models
+    draws = [dict(d) for d in rand.draws]
+    assert len({d["friction"] for d in draws}) == 3 and all(0.4 <= d["friction"] <= 1.25 for d in draws)
+    trunk = batch.world.trunk
+    base = batch.world.model
+    for model, d in zip(models, draws):  # each row's own model carries its draw
+        assert model.body_mass[trunk] == pytest.approx(base.body_mass[trunk] * d["trunk_mass"])
+        assert model.geom_friction[0, 0] == pytest.approx(base.geom_friction[0, 0] * d["friction"])
+    # a position saved and restored brings the world back with the episode
+    position = batch.row_position(1)
+    batch.reset_row(1)
+    assert rand.draws[1] != draws[1]
+    batch.restore_row(1, position)
+    assert rand.draws[1] == draws[1] and models[1].body_mass[trunk] == pytest.approx(base.body_mass[trunk] *
+                                                                                     draws[1]["trunk_mass"])
+    # an evaluation env is the nominal world unless a draw is fixed, which it replays
+    evaluation = LeggedBatchEnv(gym_make_kwargs(cfg.env, evaluation=True) | {}, num_envs=1, evaluation=True)
+    evaluation.reset(seed=11)
+    assert evaluation.models[0].body_mass[trunk] == base.body_mass[trunk]
+    evaluation.task.randomize.fix(0, draws[2])
+    evaluation.reset_row(0, 5)
+    assert evaluation.task.randomize.draws[0] == draws[2]
+    assert evaluation.models[0].body_mass[trunk] == pytest.approx(base.body_mass[trunk] * draws[2]["trunk_mass"])
+
+
+def test_the_tracking_error_of_a_robot_that_stands_is_its_command():
+    """Zero actions hold the standing pose: the measured velocity is ~0, so each command's error is its size."""
+    import torch
+
+    from ppo_torchrl.envs import env_spec, make_batch
+    from ppo_torchrl.models import make_actor_critic
+    from ppo_torchrl.tasks.locomotion import tracking
+
+    cfg = joystick("policy.log_std_init=-5")
+    ac = make_actor_critic(cfg.policy, env_spec(cfg.env))
+    with torch.no_grad():
+        for p in ac.actor.parameters():
+            p.zero_()  # the mean action 0: each joint's target its standing angle
+    commands = (("stand", 0.0, 0.0, 0.0), ("forward", 0.3, 0.0, 0.0), ("turn left", 0.0, 0.0, 0.25))
+    result = tracking.track(make_batch, cfg, ac, None, episodes=1, seed=0, commands=commands, settle_time=5.0,
+                            measure_time=5.0)
+    rows = {r["command"]: r for r in result["commands"]}
+    assert rows["stand"]["v_xy_error"] < 0.01 and rows["stand"]["joint_motion_rms"] < 0.01
+    assert rows["forward"]["v_xy_error"] == pytest.approx(0.3, abs=0.01)
+    assert rows["turn left"]["yaw_rate_error"] == pytest.approx(0.25, abs=0.01)
+    assert rows["forward"]["falls"] == 0.0 and result["overall"]["episodes"] == 3
