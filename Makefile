@@ -17,7 +17,7 @@ $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip $(PIP_FLAGS) || test -n "$(PIP_FLAGS)"
 	$(PY) -m pip install --quiet $(PIP_FLAGS) $(TORCH)
-	$(PY) -m pip install --quiet $(PIP_FLAGS) -e ".[test,loggers,sweeps,envpool]"
+	$(PY) -m pip install --quiet $(PIP_FLAGS) -e ".[test,loggers,sweeps,envpool,deploy]"
 	touch $(STAMP)
 
 # make exits 2 whenever a recipe fails; a run stopped by a signal (exit 128 + n: Ctrl-C 130) stops make by

@@ -87,10 +87,46 @@ def main(argv: list[str]) -> Path:
     if why:
         raise ConfigError(f"cannot write {target}: {why}; copy the run dir somewhere writable")
     path = export_policy(cfg, ac, state["normalization"]["obs"], target, owner=run_dir)
+    written = [path]
+    if cfg.env.get("legged") is not None:  # a robot: ONNX beside it, the layout it takes, the deploy check
+        written += export_deploy(cfg, ac, state["normalization"]["obs"], target.parent, run_dir)
     if is_run(run_dir):
-        record(run_dir, [path])
-    print(f"exported {cfg.env.id} policy ({label(checkpoint)}, {state['frames']} frames) to {path}")
+        record(run_dir, written)
+    print(f"exported {cfg.env.id} policy ({label(checkpoint)}, {state['frames']} frames) to {path}"
+          + (f"; beside it {', '.join(p.name for p in written[1:])} (python {written[-1].name} policy.json: the "
+             "policy in plain MuJoCo)" if len(written) > 1 else ""))
     return path
+
+
+DEPLOY_FILES = ("policy.onnx", "policy.json", "deploy_mujoco.py")
+
+
+def export_deploy(cfg, ac: ActorCritic, obs_stats: Optional[dict], directory: Path, owner: Optional[Path]) -> list:
+    """A legged run's deploy files beside policy.pt: policy.onnx (the same module), policy.json (the observation
+    layout and action mapping a robot feeds it: tasks/locomotion/deploy.py) and deploy_mujoco.py (drives it in plain
+    MuJoCo from those alone)."""
+    import io
+    import json
+
+    from ppo_torchrl.tasks.locomotion import deploy, deploy_mujoco
+
+    module = deployed_policy(cfg, ac, obs_stats)
+    obs_dim = ac.policy_net[0][0].in_features
+    import warnings
+
+    buffer = io.BytesIO()
+    with torch.no_grad(), warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # torch.onnx's notes on its TorchScript exporter: nothing a user can act on
+        torch.onnx.export(module, (torch.zeros(1, obs_dim, dtype=torch.float64),), buffer, dynamo=False,
+                          input_names=["observation"], output_names=["action"],
+                          dynamic_axes={"observation": {0: "batch"}, "action": {0: "batch"}})
+    paths = [directory / name for name in DEPLOY_FILES]
+    atomic_write_bytes(paths[0], lambda f: f.write(buffer.getvalue()), owner)
+    text = json.dumps(deploy.manifest(cfg), indent=1).encode()
+    atomic_write_bytes(paths[1], lambda f: f.write(text), owner)
+    script = Path(deploy_mujoco.__file__).read_bytes()
+    atomic_write_bytes(paths[2], lambda f: f.write(script), owner)
+    return paths
 
 
 if __name__ == "__main__":

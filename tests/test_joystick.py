@@ -129,3 +129,44 @@ def test_the_tracking_error_of_a_robot_that_stands_is_its_command():
     assert rows["forward"]["v_xy_error"] == pytest.approx(0.3, abs=0.01)
     assert rows["turn left"]["yaw_rate_error"] == pytest.approx(0.25, abs=0.01)
     assert rows["forward"]["falls"] == 0.0 and result["overall"]["episodes"] == 3
+
+
+def test_policy_json_is_the_observation_the_env_gives_and_the_deploy_script_drives_the_export(tmp_path):
+    """The layout export writes down is the env's own observation, element for element (from the same state), and
+    the standalone script (torch and mujoco only) drives policy.pt and policy.onnx alike in plain MuJoCo."""
+    import json
+    import subprocess
+    import sys
+
+    from ppo_torchrl.envs import env_spec
+    from ppo_torchrl.export import export_deploy, export_policy
+    from ppo_torchrl.models import make_actor_critic
+    from ppo_torchrl.tasks.locomotion import deploy_mujoco
+
+    cfg = joystick()
+    ac = make_actor_critic(cfg.policy, env_spec(cfg.env))
+    export_policy(cfg, ac, None, tmp_path / "policy.pt")
+    written = export_deploy(cfg, ac, None, tmp_path, None)
+    assert [p.name for p in written] == ["policy.onnx", "policy.json", "deploy_mujoco.py"]
+    manifest = json.loads((tmp_path / "policy.json").read_text())
+    assert sum(p["size"] for p in manifest["observation"]) == manifest["obs_dim"]
+    batch = LeggedBatchEnv(gym_make_kwargs(cfg.env), num_envs=1, threads=1)
+    batch.task.randomize.obs_noise = 0.0  # the env's observation without its training noise
+    batch.task.randomize.noise_scale[:] = 0.0
+    batch.reset(seed=4)
+    for _ in range(7):
+        batch.step(np.random.default_rng(0).uniform(-0.3, 0.3, (1, 12)).astype(np.float32))
+    command = batch.task.command.observe()[0]
+    t = batch.task.memory.clock_steps[0] * batch.world.dt
+    mine = deploy_mujoco.observation(batch.models[0], batch.datas[0], manifest, command, t)
+    np.testing.assert_allclose(mine, batch.last_obs[0], rtol=0, atol=1e-12)
+    outputs = []
+    for policy in ("policy.pt", "policy.onnx"):
+        result = subprocess.run([sys.executable, "deploy_mujoco.py", "policy.json", "--policy", policy, "--commands",
+                                 "forward:0.3,0,0:0.2;stop:0,0,0:0.1", "--noise", "1"], cwd=tmp_path,
+                                capture_output=True, text=True, timeout=120)
+        assert result.returncode == 0, result.stderr[-1500:]
+        lines = [json.loads(line) for line in result.stdout.splitlines()]
+        assert [line["segment"] for line in lines] == ["forward", "stop"] and not any(line["fell"] for line in lines)
+        outputs.append(lines)
+    assert outputs[0] == outputs[1]  # TorchScript and ONNX act alike
