@@ -248,6 +248,13 @@ def main(argv: list[str]) -> dict:
     if any(arg.startswith(("video_episodes=", "video_length=")) for arg in argv):
         args["video"] = True
     video_episodes, video_length = parse_video_choices(args["video_episodes"], args["video_length"], args["episodes"])
+    driving = None
+    if args["drive"]:
+        from ppo_torchrl.tasks.locomotion.drive import parse
+
+        driving = parse(args["drive"])
+        if args["tracking"] or heights or args["video"]:
+            raise ConfigError("drive= films its own episode: leave out tracking=, heights= and video=")
     if args["extremes"] and not args["tracking"]:
         raise ConfigError("extremes=true goes with tracking=true (a joystick run's tracking at its randomization's ends)")
     if args["tracking"] and (heights or args["video"]):
@@ -264,7 +271,7 @@ def main(argv: list[str]) -> dict:
     if why:
         raise ConfigError(f"cannot write the eval's files in {out_dir}: {why}; give a writable dir with out=<dir>")
     video = out_dir / f"{which}.mp4"
-    writes = [out_dir / name for name in TRACKING_FILES] if args["tracking"] else \
+    writes = [out_dir / "drive.mp4"] if driving else [out_dir / name for name in TRACKING_FILES] if args["tracking"] else \
         [out_dir / name for name in sweep.SWEEP_FILES] if heights else [out_dir / "eval.json"] + [video] * args["video"]
     check_replaceable(run_dir, writes)  # a file there that the app did not write is left alone: one line
     read(holder(out_dir))  # out= in another run dir: that one is read (and written) too
@@ -281,6 +288,17 @@ def main(argv: list[str]) -> dict:
     label = f"{env_label(cfg.env)} @ {state['frames']} frames ({which})"
     if args["tracking"]:
         return tracking_eval(cfg, ac, obs_stats, args, out_dir, run_dir, label)
+    if args["drive"]:
+        from ppo_torchrl.tasks.locomotion.drive import drive
+
+        segments = drive(make_batch, cfg, ac, obs_stats, driving, out_dir / "drive.mp4", episode_seeds(args["seed"], 1)[0],
+                         owner=run_dir)
+        record(run_dir, [out_dir / "drive.mp4"])
+        for segment in segments:
+            print(f"{segment['segment']}: command {segment['command']}, measured "
+                  f"{[round(x, 3) for x in segment['measured']]}" + (" (fell)" if segment["fell"] else ""))
+        print(f"{label}: {out_dir / 'drive.mp4'}")
+        return {"drive": segments}
     if heights:
         heights = sweep.heights_in_metres(heights, cfg.env)
         rows = sweep.height_sweep(cfg, ac, obs_stats, heights, args["episodes"], args["seed"], out_dir,

@@ -10,7 +10,7 @@ import sys
 
 def _evaluate():
     usage = ("python -m ppo_torchrl.evaluate run=<run dir> [checkpoint=best|last|<file>] [episodes=10] [video=false] "
-             "[video_episodes=0] [video_length=<s>] [seed=0] [heights=<m,m,...> [out=<dir>]] [tracking=false [extremes=false]] "
+             "[video_episodes=0] [video_length=<s>] [seed=0] [heights=<m,m,...> [out=<dir>]] [tracking=false [extremes=false]] [drive=<segments>] "
              "[env.<key>=<value> ...]")
     help = {
         "run": "the run dir to evaluate (one with checkpoints/), or latest, or latest/<env>: the newest run under outputs/",
@@ -29,6 +29,8 @@ def _evaluate():
         "out": "where the eval writes its files: eval.json, the video, a height sweep's (empty: <run dir>/eval)",
         "tracking": "a joystick run (env.legged.command.kind=velocity): `episodes` episodes per command of a fixed set, "
                     "each held; writes tracking.json, tracking.md and tracking.png (tasks/locomotion/tracking.py)",
+        "drive": "a joystick run: film a scripted command sequence, name:vx,vy,yaw:seconds;... in the robot's units, "
+                 "the command drawn in each frame: drive.mp4 (tasks/locomotion/drive.py)",
         "extremes": "with tracking=true, the same once per corner of the run's randomization (grip, trunk mass, "
                     "strength at their ends)",
     }
@@ -38,7 +40,7 @@ def _evaluate():
              "env.<key>=<value> changes the run's env config for this evaluation, e.g. env.terrain.step_height=0.1\n"
              "(a step height in m) or env.xml_file=quadruped_step.xml (a flat-ground run on the step).")
     spec = {"run": None, "checkpoint": "best", "episodes": 10, "video": False, "video_episodes": "0",
-            "video_length": "", "seed": 0, "heights": "", "out": "", "tracking": False, "extremes": False}
+            "video_length": "", "seed": 0, "heights": "", "out": "", "tracking": False, "extremes": False, "drive": ""}
     return usage, spec, help, about
 
 
