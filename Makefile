@@ -50,7 +50,8 @@ trot: $(STAMP)
 # checkpoint, EPISODES per height at HEIGHTS (in leg lengths l) on episode seeds SWEEP_SEED * 1000 + i, in
 # ROBOT_DIR/sweep, and the same episodes at 0.25 l in two other worlds, every contact's grip halved
 # (ROBOT_DIR/sweep_grip_half) and the trunk 10% heavier (ROBOT_DIR/sweep_trunk_heavier); then the run's records
-# (metrics.csv.xz; with legged_trot_v2 last.pt as a record checkpoint, no optimizer state; results/README.md).
+# (metrics.csv.xz; last.pt as a record checkpoint, no optimizer state, for every recipe but issue 46's frozen
+# legged_trot; results/README.md).
 # XML: a path, or a shipped model (menagerie/<robot>/scene.xml).
 #   make robot RECIPE=legged_trot_v2 XML=menagerie/unitree_a1/scene.xml SEED=12 SWEEP_SEED=<s> ROBOT_DIR=<dir>
 RECIPE ?= legged_trot
@@ -68,7 +69,7 @@ robot: $(STAMP)
 		heights=0.25l env.legged.trunk_mass_scale=1.1 out=$(ROBOT_DIR)/sweep_trunk_heavier
 	$(PY) -m ppo_torchrl.records $(ROBOT_DIR)/metrics.csv $(foreach d,sweep sweep_grip_half sweep_trunk_heavier,\
 		$(ROBOT_DIR)/$(d)/height_sweep.json $(ROBOT_DIR)/$(d)/height_sweep_episodes.csv) \
-		$(if $(filter legged_trot_v2,$(RECIPE)),$(ROBOT_DIR)/checkpoints/last.pt)
+		$(if $(filter-out legged_trot,$(RECIPE)),$(ROBOT_DIR)/checkpoints/last.pt)
 
 # stage(run dir, overrides): start the run there, resume it when a run there stopped, skip it when it finished.
 # A run committed mid-way to results/ holds metrics.csv.xz only: its metrics.csv comes back before the resume.

@@ -170,3 +170,14 @@ def test_policy_json_is_the_observation_the_env_gives_and_the_deploy_script_driv
         assert [line["segment"] for line in lines] == ["forward", "stop"] and not any(line["fell"] for line in lines)
         outputs.append(lines)
     assert outputs[0] == outputs[1]  # TorchScript and ONNX act alike
+
+
+def test_a_drive_script_is_parsed_or_refused_in_one_line():
+    from ppo_torchrl.errors import ConfigError
+    from ppo_torchrl.tasks.locomotion.drive import DEFAULT, parse
+
+    segments = parse(DEFAULT)
+    assert [s[0] for s in segments] == ["forward", "turn", "left", "stop"] and segments[1][1] == [0.0, 0.0, 0.25]
+    for bad in ("forward:0.3,0:4", "forward:0.3,0,0:-1", "forward:0.3,0,0", "x:nan,0,0:1"):
+        with pytest.raises(ConfigError, match="expected name:vx,vy,yaw:seconds"):
+            parse(bad)
