@@ -194,9 +194,13 @@ def mjcf_kwargs(env_cfg) -> dict:
 
 
 def _plain(value):
-    """An OmegaConf node as plain Python (dicts, lists), anything else as is."""
+    """An OmegaConf node or a config dataclass as plain Python (dicts, lists), anything else as is."""
+    import dataclasses
+
     from omegaconf import OmegaConf
 
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return dataclasses.asdict(value)
     return OmegaConf.to_container(value, resolve=True) if OmegaConf.is_config(value) else value
 
 
@@ -217,7 +221,7 @@ def gym_make_kwargs(env_cfg, render_mode: Optional[str] = None, evaluation: bool
         terrain, default = env_cfg.get("terrain") or {}, TerrainConfig()
         changed = [f"terrain.{k}" for k in terrain if k in TERRAIN_KNOBS and _plain(terrain[k]) != getattr(default, k)]
         loco, loco_default = env_cfg.get("locomotion") or {}, LocomotionConfig()
-        changed += [f"locomotion.{k}" for k in loco if _plain(loco[k]) != getattr(loco_default, k, None)]
+        changed += [f"locomotion.{k}" for k in loco if _plain(loco[k]) != _plain(getattr(loco_default, k, None))]
         changed += ["legged"] if env_cfg.get("legged") is not None else []
         if changed:  # a key this env does not read is refused, never ignored
             raise ConfigError(f"env.{changed[0]} works on MJCF robots (env=mjcf, env=legged, env=quadruped_step), "
