@@ -32,8 +32,8 @@ def run_name(experiment, env_choice, env_id, xml_file) -> str:
             robot = Path(str(xml_file)).stem
     if experiment is not None:
         return f"{experiment}_{robot}" if robot and env_choice == "legged" else str(experiment)
-    if env_choice == "gym":
-        return str(env_id)
+    if env_choice in ("gym", "playground"):  # MuJoCoPlayground/<task>-v1, EnvPool's alias: the task's name
+        return str(env_id).rpartition("/")[2]
     return robot or str(env_choice)
 
 

@@ -264,6 +264,22 @@ class LeggedConfig:
 
 
 @dataclass
+class PlaygroundConfig:
+    """env=playground: a MuJoCo Playground task as EnvPool ships it (its C++ port; envs_playground.py). env.id is the
+    task's EnvPool id (Go1JoystickFlatTerrain-v1), env.make_kwargs its EnvPool settings (noise_level, kp, ...),
+    env.max_episode_steps its time limit (null: the task's own)."""
+
+    # The keys of the task's dict observation: the actor's (policy.critic_obs=observation: the critic's too), and the
+    # one policy.critic_obs=privileged gives the critic (as privileged_observation). A task whose observation is one
+    # vector gives it all to the actor and has no privileged one.
+    observation_key: str = "state"
+    privileged_key: str = "privileged_state"
+    # EnvPool's num_threads, the C++ threads that step a training run's pool (one pool of collector.num_envs per
+    # collector process); null: min(collector.num_envs, the CPUs this process may use).
+    threads: Optional[int] = None
+
+
+@dataclass
 class EnvConfig:
     """Which Gymnasium environment to train on (envs.py)."""
 
@@ -278,6 +294,8 @@ class EnvConfig:
     terrain: TerrainConfig = field(default_factory=TerrainConfig)
     # env=legged: the robot of xml_file read from its model and the recipe scaled to it; null: not a legged env
     legged: Optional[LeggedConfig] = None
+    # env=playground: a MuJoCo Playground task stepped by EnvPool; null: not one
+    playground: Optional[PlaygroundConfig] = None
     transforms: TransformsConfig = field(default_factory=TransformsConfig)
 
 
@@ -303,6 +321,10 @@ class PolicyConfig:
     # although hidden_sizes reads [64, 64]). null: the lists apply as written.
     width: Optional[int] = None
     activation: str = "tanh"  # tanh | relu | elu
+    # What the critic reads: observation (the actor's input, the default) or privileged (an asymmetric critic: the env's
+    # privileged observation, e.g. a Playground task's privileged_state, under the batch key privileged_observation
+    # with normalization statistics of its own; the actor still reads the observation alone, and export carries it).
+    critic_obs: str = "observation"
     shared_trunk: bool = False  # one trunk (hidden_sizes) with a policy head and a value head
     ortho_init: bool = True  # orthogonal init, gain sqrt(2) hidden, policy_head_gain, value_head_gain
     policy_head_gain: float = 0.01

@@ -10,18 +10,26 @@ Both give: `n`; `step(actions)` -> (observations, rewards, terminated, truncated
 far); `metrics()` (what each row reports: a step env's curriculum, a task's reward terms) and `metric_keys()` (the
 keys beyond loggers.COLUMNS that metrics.csv gets a column for); `positions()`,
 `restore(positions)` (now) and `hold(positions)` (at each row's next reset: TorchRL's Collector resets first);
-`layout()`; `gym_env()`, a Gymnasium env a TorchRL GymWrapper wraps.
+`layout()`; `privileged_layout()` (the layout of the env's privileged observation, None without one: what
+policy.critic_obs=privileged gives the critic); `gym_env()`, a Gymnasium env a TorchRL GymWrapper wraps.
+
+The privileged observation, for any env kind: the env declares `privileged_layout()` (its Gymnasium env's unwrapped
+env, or the batched env), the rows return it here, `make_torchrl_env(privileged=True)` gives EnvState a normalizer of
+its own for it, and the env's collector writes it normalized into the batch under layout.PRIVILEGED and
+("next", PRIVILEGED), which the critic reads. Today env=playground's rows (envs_playground.PlaygroundRows) and
+collector (collectors/playground.py) do; the fast collector's rollout of GymRows / BatchRows does not write it yet, so
+validation refuses policy.critic_obs=privileged for an env whose rows declare none.
 """
 
 from __future__ import annotations
 
 import functools
-from typing import List
+from typing import List, Optional
 
 import gymnasium as gym
 import numpy as np
 
-from ppo_torchrl.layout import ObservationLayout, layout_of
+from ppo_torchrl.layout import ObservationLayout, layout_of, privileged_layout_of
 
 
 class GymRows:
@@ -72,6 +80,9 @@ class GymRows:
     def layout(self) -> ObservationLayout:
         return layout_of(self.envs[0])
 
+    def privileged_layout(self) -> Optional[ObservationLayout]:
+        return privileged_layout_of(self.envs[0])
+
     def gym_env(self) -> gym.Env:
         if self.n == 1:
             return self.envs[0]
@@ -120,6 +131,9 @@ class BatchRows:
 
     def layout(self) -> ObservationLayout:
         return self.batch.observation_layout()
+
+    def privileged_layout(self) -> Optional[ObservationLayout]:
+        return privileged_layout_of(self.batch)
 
     def gym_env(self):
         return self.batch

@@ -9,15 +9,18 @@ it (in env order):
   chain apply them to TorchRL's data; they hold no state of their own;
 - each env's episode so far (Gymnasium's `RecordEpisodeStatistics`), written to every step and reset as
   TorchRL's `episode_reward` / `step_count` (RewardSum's and StepCounter's keys);
-- the env metrics (a step env's curriculum level and recent success rate): each env's, averaged once, over
-  every env of every worker, where they are logged (`mean_metrics`);
+- the env metrics (a step env's curriculum level and recent success rate, a task's reward terms' episode sums: the
+  rows' `metrics()`): each env's, averaged once, over every env of every worker, where they are logged
+  (`mean_metrics`);
+- the statistics of the env's privileged observation (`privileged_norm`, policy.critic_obs=privileged: the
+  critic's input, layout.PRIVILEGED), beside the observation's, or None;
 - each env's position (positions.py: simulator, time limit, RNG, episode so far, last observation) and the
   normalized observation its policy acts on next (`emit`: the fast collector and the `ObservationNormalization`
   transform tell it here), the rows a resumed run's next reset gives back, and the statistics from before a
   reset that no step has followed yet (a second one puts them back: each first observation counted once).
   The normalizers hold statistics only; this is the one writer of the rest.
 
-Its state is one snapshot, `{"obs", "reward", "metrics", "positions"}`, with a small API that every collector
+Its state is one snapshot, `{"obs", "reward", "privileged", "metrics", "positions"}`, with a small API that every collector
 and every scale uses:
 - `snapshot()` / `restore(snapshot)`: the whole of it, or the parts given (stats without positions: each
   env stays where it is; positions are held until `continue_episodes` puts each env back);
@@ -52,10 +55,11 @@ class EnvState(Transform):
     """The env-side state of the envs under one `TransformedEnv` (module doc); it changes nothing in the data but
     the episode counters it writes."""
 
-    def __init__(self, rows, obs_norm: ObservationNormalizer, reward_norm: Optional[RewardNormalizer] = None):
+    def __init__(self, rows, obs_norm: ObservationNormalizer, reward_norm: Optional[RewardNormalizer] = None,
+                 privileged_norm: Optional[ObservationNormalizer] = None):
         super().__init__(in_keys=[], out_keys=list(EPISODE_KEYS))
-        self.rows = rows  # env_rows.GymRows or BatchRows
-        self.obs_norm, self.reward_norm = obs_norm, reward_norm
+        self.rows = rows  # env_rows.GymRows or BatchRows (or envs_playground.PlaygroundRows)
+        self.obs_norm, self.reward_norm, self.privileged_norm = obs_norm, reward_norm, privileged_norm
         self.held_positions: Optional[dict] = None  # {"envs", "acted_on"} restored, waiting for continue_episodes
         # What each env's policy acts on next, as it saw it: its last normalized observation (a resume gives it back
         # rather than normalizing the raw one again with statistics that have moved since); the rows the next full
@@ -161,6 +165,7 @@ class EnvState(Transform):
     def snapshot(self, positions: bool = True) -> dict:
         return {"obs": self.obs_norm.state_dict(),
                 "reward": self.reward_norm.state_dict() if self.reward_norm is not None else None,
+                "privileged": self.privileged_norm.state_dict() if self.privileged_norm is not None else None,
                 "metrics": self.env_metrics(),
                 "positions": {"envs": self.positions(), "acted_on": self.acted_on()} if positions else None}
 
@@ -175,6 +180,8 @@ class EnvState(Transform):
             self.obs_norm.load_state_dict(snapshot["obs"])
         if snapshot.get("reward") is not None and self.reward_norm is not None:
             self.reward_norm.load_state_dict(snapshot["reward"], running=returns)
+        if snapshot.get("privileged") is not None and self.privileged_norm is not None:
+            self.privileged_norm.load_state_dict(snapshot["privileged"])
         if snapshot.get("positions") is not None:
             self.held_positions = snapshot["positions"]
 
@@ -187,6 +194,7 @@ class EnvState(Transform):
         reward_parts = [p["reward"] for p in parts if p.get("reward") is not None]
         return {"obs": pooled(base.get("obs"), [p.get("obs") for p in parts]),
                 "reward": pooled(base.get("reward"), reward_parts) if reward_parts else None,
+                "privileged": pooled(base.get("privileged"), [p.get("privileged") for p in parts]),
                 "metrics": [m for p in parts for m in p.get("metrics") or []],
                 "positions": None}
 
@@ -197,7 +205,8 @@ class EnvState(Transform):
         reward = merged.get("reward")
         if reward is not None and own.get("reward") is not None:
             reward = {**reward, "returns": own["reward"]["returns"]}
-        return {"obs": merged.get("obs"), "reward": reward, "metrics": merged.get("metrics"), "positions": None}
+        return {"obs": merged.get("obs"), "reward": reward, "privileged": merged.get("privileged"),
+                "metrics": merged.get("metrics"), "positions": None}
 
     # ------------------------------------------------------------------ TorchRL's face of the state
     def get_extra_state(self) -> dict:

@@ -29,7 +29,7 @@ from ppo_torchrl.normalization import (
 )
 from ppo_torchrl.env_rows import BatchRows, GymRows
 from ppo_torchrl.env_state import EnvState
-from ppo_torchrl.layout import OBS_LAYOUTS
+from ppo_torchrl.layout import OBS_LAYOUTS, privileged_layout_of
 from ppo_torchrl.mjcf import FLOOR_DRAWN_M, MjcfInfo, check_mjcf, floor_to_the_horizon  # noqa: F401 (their home)
 from ppo_torchrl.positions import resumable
 
@@ -57,6 +57,7 @@ class EnvSpec:
     action_low: np.ndarray
     action_high: np.ndarray
     env: Any = field(default=None, compare=False, repr=False)
+    privileged_dim: Optional[int] = None  # the env's privileged observation (layout.privileged_layout_of), if any
 
     def take_env(self):
         env, self.env = self.env, None
@@ -76,9 +77,11 @@ def env_files() -> list[str]:
 def check_env_id(env_id: str) -> None:
     """Fail with one line unless `env_id` is a registered continuous-control Gymnasium env (or mjcf)."""
     if env_id not in gym.registry and env_id != MJCF_ID:
+        from ppo_torchrl.envs_playground import playground_hint
+
         known = ", ".join(n for n in env_files() if n != "gym")
         raise ConfigError(
-            f"unknown environment id '{env_id}': not registered in Gymnasium. "
+            f"unknown environment id '{env_id}': not registered in Gymnasium{playground_hint(env_id)}. "
             f"Env files: {known}. Any other registered id: env=gym env.id=<id>"
         )
 
@@ -253,6 +256,10 @@ def tracking_camera(env_id: str) -> dict:
 
 
 def make_gym_env(env_cfg, render_mode: Optional[str] = None, evaluation: bool = False, **render_kwargs) -> gym.Env:
+    if env_cfg.get("playground") is not None:  # env=playground: a MuJoCo Playground task stepped by EnvPool
+        from ppo_torchrl.envs_playground import make_playground_env
+
+        return make_playground_env(env_cfg, render_mode, **render_kwargs)
     kwargs = gym_make_kwargs(env_cfg, render_mode, evaluation, **render_kwargs)
     env_id = env_cfg.id
     if env_cfg.get("xml_file"):  # an MJCF robot: Ant-v5's class with robots/env.py's additions
@@ -345,6 +352,7 @@ def env_spec(env_cfg, keep_env: bool = False) -> EnvSpec:
         action_dim=int(action_space.shape[0]),
         action_low=action_space.low.astype(np.float32),
         action_high=action_space.high.astype(np.float32),
+        privileged_dim=getattr(privileged_layout_of(env), "size", None),
     )
     if keep_env:
         spec.env = env
@@ -372,11 +380,18 @@ def make_batch(env_cfg, num_envs: int = 1, evaluation: bool = False, render_mode
 
 def make_rows(env_cfg, num_envs: int, train: bool = True, render_mode: Optional[str] = None, first_env=None,
               threads: Optional[int] = None, **render_kwargs):
-    """The rows of a training or evaluation env (env_rows.py): a batch for env=legged, else Gymnasium envs."""
+    """The rows of a training or evaluation env (env_rows.py): a batch for env=legged, views of one EnvPool for
+    env=playground, else Gymnasium envs."""
     if batched(env_cfg):
         if first_env is not None:
             first_env.close()
         return BatchRows(make_batch(env_cfg, num_envs, not train, render_mode, threads, **render_kwargs))
+    if env_cfg.get("playground") is not None:  # the num_envs envs: views of one EnvPool (envs_playground.py)
+        from ppo_torchrl.envs_playground import PlaygroundRows
+
+        return PlaygroundRows([resumable(first_env if i == 0 and first_env is not None else
+                                         make_gym_env(env_cfg, render_mode, not train, **render_kwargs))
+                               for i in range(num_envs)])
     return GymRows([resumable(first_env if i == 0 and first_env is not None else
                               make_gym_env(env_cfg, render_mode, not train, **render_kwargs)) for i in range(num_envs)])
 
@@ -404,6 +419,7 @@ def make_torchrl_env(
     seed: Optional[int] = None,
     first_env=None,
     threads: Optional[int] = None,
+    privileged: bool = False,
     **render_kwargs,
 ) -> TransformedEnv:
     """`TransformedEnv(GymWrapper(gymnasium env))` with the configured transforms: the card's pipeline,
@@ -418,6 +434,8 @@ def make_torchrl_env(
     seed: each env i is reset with seed + i once built, so that everything that follows is reproducible.
     first_env: a Gymnasium env of `env_cfg` already built (env_spec's, kept by the command's check): env 0.
     threads: a batched env's physics threads (collector.physics_threads; None or 0: one per core).
+    privileged: the env's privileged observation gets statistics of its own too (policy.critic_obs=privileged): the
+    rows declare its layout (`privileged_layout()`, env_rows.py).
     """
     t = env_cfg.transforms
     rows = make_rows(env_cfg, num_envs, train, render_mode, first_env, threads, **render_kwargs)
@@ -435,7 +453,12 @@ def make_torchrl_env(
                                            fit_env=functools.partial(make_gym_env, env_cfg) if train else None,
                                            layout=rows.layout())
     reward_norm = make_reward_normalizer(t, num_envs, gamma) if train else None
-    state = EnvState(rows, obs_norm, reward_norm)
+    privileged_layout = rows.privileged_layout() if privileged else None
+    if privileged and privileged_layout is None:
+        raise ConfigError(f"policy.critic_obs=privileged: env.id={env_cfg.id} has no privileged observation")
+    privileged_norm = None if privileged_layout is None else make_observation_normalizer(
+        t, privileged_layout.size, layout=privileged_layout)  # running statistics of their own (the critic's)
+    state = EnvState(rows, obs_norm, reward_norm, privileged_norm)
     transforms = [state]
     if clip_actions:  # Normal head: the env gets the clipped action, the batch keeps the sample
         spec = base.action_spec

@@ -85,6 +85,7 @@ def run_episodes(cfg, ac: ActorCritic, obs_stats: Optional[dict], seeds: Sequenc
     mode = ExplorationType.DETERMINISTIC if deterministic else ExplorationType.RANDOM
     returns, lengths, distances = [], [], []
     terminated = []  # per episode: ended by the env (not its time limit)
+    metrics = []  # per episode, where the env keeps them (episode_metrics(): a Playground task's reward terms)
     gym_env = env_state_of(env).gym_envs[0]
     film = (Filming(video_path, gym_env, [e for e in video_episodes if 0 <= e < episodes], video_length)
             if video_path is not None else None)
@@ -105,6 +106,8 @@ def run_episodes(cfg, ac: ActorCritic, obs_stats: Optional[dict], seeds: Sequenc
                 returns.append(float(rollout.get(("next", "reward")).sum()))
                 lengths.append(int(rollout.shape[-1]))
                 terminated.append(bool(rollout.get(("next", "terminated"))[-1].any()))
+                if hasattr(gym_env.unwrapped, "episode_metrics"):
+                    metrics.append(gym_env.unwrapped.episode_metrics())
                 if sim is not None:
                     moved = sim.qpos[:2] - xy_start
                     distances.append((float(moved[0]), float(sim.qpos[0])))
@@ -119,7 +122,8 @@ def run_episodes(cfg, ac: ActorCritic, obs_stats: Optional[dict], seeds: Sequenc
     return {"returns": returns, "lengths": lengths, "distances": distances, "gaits": [], "crossed": [],
             "heights": [], "dt": gym_env.unwrapped.dt if sim is not None else None, "success_margin": None,
             "video": video, "terminated": terminated, "ends": [None] * len(seeds), "seeds": list(seeds), "feet": None,
-            "figures": "locomotion" if sim is not None else None}  # a MuJoCo base's forward velocity
+            "metrics": metrics,  # a MuJoCo base's forward velocity; a Playground task's reward terms
+            "figures": "locomotion" if sim is not None else "playground" if cfg.env.get("playground") is not None else None}
 
 
 def summarize(cfg, episodes: dict) -> dict:

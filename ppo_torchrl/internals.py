@@ -17,6 +17,11 @@ TorchRL's collectors:
 Hydra's Optuna sweeper: the search space a command's `key=choice(...)` overrides make, as the sweeper makes it
 (`_impl.create_params_from_overrides`), so a stored study is checked against the command before a trial runs.
 
+EnvPool's renderer (envs_playground.py films a Playground task with `pool.render()`): it draws into the OpenGL
+context current in the calling thread, and makes one itself only on Windows (envpool/python/envpool.py,
+`_ensure_platform_render_context`); elsewhere it fails with "an OpenGL platform library has not been loaded"
+unless one is current. `gl_context` makes one with MuJoCo's public `mujoco.GLContext` (headless: MUJOCO_GL=egl).
+
 TorchRL's `CSVLogger`: its files (`logs/<name>/scalars/<key>.csv`, rows `step,value`), whose rows past a
 checkpoint a resume drops.
 """
@@ -103,6 +108,22 @@ def optuna_space(overrides: list) -> dict:
     from hydra_plugins.hydra_optuna_sweeper._impl import create_params_from_overrides
 
     return create_params_from_overrides(overrides)[0]
+
+
+_GL_CONTEXTS: dict = {}  # thread id -> the mujoco.GLContext made current there (kept alive: EnvPool draws into it)
+
+
+def gl_context(width: int, height: int) -> None:
+    """An OpenGL context current in this thread for EnvPool's renderer (module doc), made once per thread."""
+    import threading
+
+    import mujoco
+
+    key = threading.get_ident()
+    if key not in _GL_CONTEXTS:
+        context = mujoco.GLContext(max(width, 640), max(height, 480))
+        context.make_current()
+        _GL_CONTEXTS[key] = context
 
 
 def csv_logger_files(run_dir: Path) -> list:

@@ -32,6 +32,9 @@ import numpy as np
 RUNNING, FIXED, NONE = "running", "fixed", "none"
 TREATMENTS = (RUNNING, FIXED, NONE)
 WHOLE = "observation"  # the one segment of an env that declares none
+# The batch key of an env's privileged observation (policy.critic_obs=privileged: the critic's input, normalized with
+# statistics of its own): an env declares it with `privileged_layout()` (envs_playground.py's tasks do)
+PRIVILEGED = "privileged_observation"
 # env.legged.obs_layout (config.py): whole, the default (one running segment: runs saved before the key), or the
 # env's own segments (robots/env.py, observation_layout)
 OBS_LAYOUTS = ("whole", "segments")
@@ -142,3 +145,10 @@ def layout_of(gym_env) -> ObservationLayout:
     if layout.size != size:
         raise ValueError(f"the env's observation layout covers {layout.size} elements, its observation has {size}")
     return layout
+
+
+def privileged_layout_of(gym_env) -> Optional[ObservationLayout]:
+    """The layout of the privileged observation a Gymnasium env (or a batched one) declares (`privileged_layout()` on
+    its unwrapped env, which returns None when it has none), else None."""
+    declare = getattr(getattr(gym_env, "unwrapped", gym_env), "privileged_layout", None)
+    return declare() if callable(declare) else None

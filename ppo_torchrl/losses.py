@@ -15,6 +15,7 @@ from torch.func import functional_call
 
 from torchrl.objectives import A2CLoss, ClipPPOLoss, KLPENPPOLoss, LossModule, PPOLoss, ReinforceLoss
 
+from ppo_torchrl.layout import PRIVILEGED
 from ppo_torchrl.models import ActorCritic
 
 
@@ -77,9 +78,9 @@ NOT_COMPILABLE = {"kl_ppo": "its adaptive KL coefficient is updated in place ins
 
 
 # The batch keys the losses read (KLPENPPOLoss also reads the old loc/scale; value clipping the old
-# state_value): the update indexes only these per minibatch.
+# state_value; an asymmetric critic its privileged observation): the update indexes only these per minibatch.
 LOSS_INPUT_KEYS = ("observation", "action", "action_log_prob", "advantage", "value_target", "state_value",
-                   "loc", "scale")
+                   "loc", "scale", PRIVILEGED)
 # TorchRL loss output key -> the metric name in metrics.csv
 LOSS_METRICS = {
     "loss_objective": "loss/objective", "loss_actor": "loss/objective",

@@ -21,6 +21,7 @@ from torchrl.modules import ActorValueOperator, IndependentNormal, Probabilistic
 
 from ppo_torchrl.envs import EnvSpec
 from ppo_torchrl.errors import ConfigError
+from ppo_torchrl.layout import PRIVILEGED
 from ppo_torchrl.normalization import clip
 
 ACTIVATIONS = {"tanh": nn.Tanh, "relu": nn.ReLU, "elu": nn.ELU}
@@ -29,6 +30,8 @@ NUMPY_ACTIVATIONS = {nn.Tanh: np.tanh, nn.ReLU: lambda x: np.maximum(x, 0),
                      nn.ELU: lambda x: np.where(x > 0, x, np.expm1(x))}
 HEADS = ("tanh_normal", "normal")
 STD_MODES = ("state_independent", "state_dependent")
+# policy.critic_obs -> the batch key the critic's ValueOperator reads (GAE and the loss read it through its in_keys)
+CRITIC_INPUTS = {"observation": "observation", "privileged": PRIVILEGED}
 
 
 def _init_linear(layer: nn.Linear, gain: float, ortho: bool) -> nn.Linear:
@@ -81,7 +84,7 @@ class GaussianParams(nn.Module):
 @dataclass
 class ActorCritic:
     actor: ProbabilisticActor  # reads "observation", writes "action" and "action_log_prob"
-    critic: ValueOperator  # reads "observation", writes "state_value"
+    critic: ValueOperator  # reads "observation" (policy.critic_obs=privileged: PRIVILEGED), writes "state_value"
     policy_net: nn.Module  # obs tensor -> (loc, scale), the module inside `actor`
     head: str
     action_low: torch.Tensor
@@ -93,6 +96,12 @@ def validate_policy_config(cfg) -> None:
         raise ConfigError(f"policy.head='{cfg.head}' is not allowed; use one of {', '.join(HEADS)}")
     if cfg.std not in STD_MODES:
         raise ConfigError(f"policy.std='{cfg.std}' is not allowed; use one of {', '.join(STD_MODES)}")
+    critic_obs = cfg.get("critic_obs", "observation")
+    if critic_obs not in CRITIC_INPUTS:
+        raise ConfigError(f"policy.critic_obs='{critic_obs}' is not allowed; use one of {', '.join(CRITIC_INPUTS)}")
+    if critic_obs == "privileged" and cfg.shared_trunk:
+        raise ConfigError("policy.critic_obs=privileged needs a critic of its own: leave out policy.shared_trunk=true "
+                          "(a shared trunk reads the actor's observation)")
     if cfg.activation not in ACTIVATIONS:
         raise ConfigError(f"policy.activation='{cfg.activation}' is not allowed; use one of {', '.join(ACTIVATIONS)}")
     if not cfg.hidden_sizes or any(int(s) <= 0 for s in cfg.hidden_sizes):
@@ -107,8 +116,14 @@ def validate_policy_config(cfg) -> None:
 
 
 def make_actor_critic(cfg, spec: EnvSpec, device: torch.device | str = "cpu") -> ActorCritic:
-    """Build the actor and critic from the `policy` config group."""
+    """Build the actor and critic from the `policy` config group. policy.critic_obs=privileged: the critic reads the
+    env's privileged observation (spec.privileged_dim wide, batch key PRIVILEGED), the actor the observation alone."""
     validate_policy_config(cfg)
+    critic_key = CRITIC_INPUTS[cfg.get("critic_obs", "observation")]
+    critic_dim = spec.obs_dim if critic_key == "observation" else spec.privileged_dim
+    if critic_dim is None:
+        raise ConfigError("policy.critic_obs=privileged needs an env with a privileged observation (env=playground's "
+                          "tasks with a privileged_state, e.g. env.id=Go1JoystickFlatTerrain-v1); this env has none")
     hidden = [cfg.width] * len(cfg.hidden_sizes) if cfg.width else list(cfg.hidden_sizes)
     critic_hidden = [cfg.width] * len(cfg.critic_hidden_sizes) if cfg.width else list(cfg.critic_hidden_sizes)
     low = torch.as_tensor(spec.action_low)
@@ -144,9 +159,9 @@ def make_actor_critic(cfg, spec: EnvSpec, device: torch.device | str = "cpu") ->
         body, width = mlp(spec.obs_dim, hidden, cfg.activation, cfg.ortho_init)
         policy_net = nn.Sequential(body, GaussianParams(width, spec.action_dim, cfg))
         actor = probabilistic_actor(TensorDictModule(policy_net, in_keys=["observation"], out_keys=["loc", "scale"]))
-        cbody, cwidth = mlp(spec.obs_dim, critic_hidden, cfg.activation, cfg.ortho_init)
+        cbody, cwidth = mlp(critic_dim, critic_hidden, cfg.activation, cfg.ortho_init)
         value_head = _init_linear(nn.Linear(cwidth, 1), cfg.value_head_gain, cfg.ortho_init)
-        critic = ValueOperator(nn.Sequential(cbody, value_head), in_keys=["observation"])
+        critic = ValueOperator(nn.Sequential(cbody, value_head), in_keys=[critic_key])
     actor.to(device)
     critic.to(device)
     return ActorCritic(actor, critic, policy_net, cfg.head, low.to(device), high.to(device))

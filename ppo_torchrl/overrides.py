@@ -130,9 +130,13 @@ def check_env_override(overrides: list[str]) -> None:
 def env_hint(name: str, available: list[str]) -> str:
     import gymnasium as gym
 
+    from ppo_torchrl.envs_playground import playground_hint
+
     files = [n for n in available if n != "gym"]
     if name in gym.registry:
         return f"; {name} is a Gymnasium id: env=gym env.id={name}"
+    if playground_hint(name):
+        return playground_hint(name)
     near = closest(name, files + [i for i in gym.registry if "-v" in i and i not in files])
     if near is not None:
         return f"; did you mean env={near}?" if near in files else f"; did you mean env=gym env.id={near}?"

@@ -116,7 +116,11 @@ def show(value) -> str:
 
 def describe_resume(run_dir, frames: int, cfg) -> str:
     limit = ""
-    if cfg.collector.backend == "envpool":
+    if cfg.env.get("playground") is not None:
+        from ppo_torchrl.collectors.playground import RESUME_LIMIT
+
+        limit = f" ({RESUME_LIMIT})"
+    elif cfg.collector.backend == "envpool":
         from ppo_torchrl.collectors.envpool_backend import RESUME_LIMIT
 
         limit = f" ({RESUME_LIMIT})"

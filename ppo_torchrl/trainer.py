@@ -178,7 +178,7 @@ class Trainer:
                                   "leave out init_from_optimizer")
             self.optimizer.load_state_dict(state["optimizer"])
         norm = state["normalization"]
-        self.collector.load_state_dict({k: norm.get(k) for k in ("obs", "return")})
+        self.collector.load_state_dict({k: norm.get(k) for k in ("obs", "return", "privileged")})
         source_env = state.get("config", {}).get("env", {})
         print(f"init_from: weights{', optimizer' if with_optimizer else ''} and normalization stats of {path} "
               f"({state['frames']} frames on {env_label(source_env)})", file=sys.stderr)

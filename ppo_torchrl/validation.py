@@ -137,7 +137,15 @@ def validate_config(cfg, keep_env: bool = False, build_env: bool = True):
     if c.distributed == "ray" and importlib.util.find_spec("ray") is None:
         raise ConfigError(f"collector.distributed=ray needs Ray, which is not installed: {RAY_INSTALL}")
     validate_policy_config(cfg.policy)
-    return env_spec(cfg.env, keep_env=keep_env) if build_env else None
+    if not build_env:
+        return None
+    spec = env_spec(cfg.env, keep_env=keep_env)
+    if cfg.policy.critic_obs == "privileged" and spec.privileged_dim is None:
+        spec.close()
+        raise ConfigError(f"policy.critic_obs=privileged needs an env with a privileged observation (env=playground's "
+                          f"tasks with a privileged_state, e.g. env.id=Go1JoystickFlatTerrain-v1); env.id={cfg.env.id} "
+                          "has none")
+    return spec
 
 
 

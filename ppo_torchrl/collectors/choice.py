@@ -13,7 +13,8 @@ from ppo_torchrl.errors import ConfigError
 # bounds) or "sampling" (models.sampling_policy: the lean draw), the name the start line gives it)
 BACKENDS = {"fast": ("ppo_torchrl.collectors.fast", "FastCollector", "actor", "FastCollector"),
             "torchrl": ("ppo_torchrl.collectors.torchrl_path", "TorchRLCollector", "sampling", "torchrl.Collector"),
-            "envpool": ("ppo_torchrl.collectors.envpool_backend", "EnvpoolCollector", "actor", "EnvpoolCollector")}
+            "envpool": ("ppo_torchrl.collectors.envpool_backend", "EnvpoolCollector", "actor", "EnvpoolCollector"),
+            "playground": ("ppo_torchrl.collectors.playground", "PlaygroundCollector", "actor", "PlaygroundCollector")}
 CHOICES = ("auto", *BACKENDS)  # collector.backend
 # TorchRL's Collector against FastCollector, whole-process frames/s on Hopper-v4 by collector.num_envs
 # (benchmarks/speed.py --backends fast,torchrl --envs 1,8,16: results/speed/torchrl_path_2026-11-27.txt):
@@ -22,8 +23,14 @@ TORCHRL_PATH_SHARE = {1: 0.42, 8: 0.72, 16: 0.93}
 
 
 def resolve_backend(cfg) -> str:
-    """`auto`: fast unless TorchRL transforms are asked for; fast with them is a one-line error."""
+    """`auto`: fast unless TorchRL transforms are asked for; fast with them is a one-line error. env=playground:
+    the playground collector (EnvPool's pool stepped whole: collectors/playground.py), the one it runs on."""
     backend, extra = cfg.collector.backend, bool(cfg.env.transforms.extra)
+    if cfg.env.get("playground") is not None or backend == "playground":
+        from ppo_torchrl.collectors.playground import check_playground
+
+        check_playground(cfg)
+        return "playground"
     if backend == "auto":
         return "torchrl" if extra else "fast"
     if backend == "envpool":  # an option: C++ env steps (collectors/envpool_backend.py)
@@ -45,6 +52,8 @@ def describe_backend(cfg) -> Tuple[str, str]:
         why = "no env.transforms.extra" if c.backend == "auto" else "collector.backend=fast"
     elif path == "envpool":
         why = "collector.backend=envpool: the envs stepped in C++ by EnvPool"
+    elif path == "playground":
+        why = "env=playground: one EnvPool of collector.num_envs envs stepped in C++"
     else:
         why = "env.transforms.extra runs per step" if c.backend == "auto" else "collector.backend=torchrl"
         measured = max([n for n in TORCHRL_PATH_SHARE if n <= c.num_envs] or [1])

@@ -45,10 +45,12 @@ from ppo_torchrl.collectors.multiprocess import (
 from ppo_torchrl.env_state import EnvState, env_state_of, mean_metrics
 from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.envs import make_torchrl_env
+from ppo_torchrl.layout import PRIVILEGED
 from ppo_torchrl.models import sampling_policy
 
 BATCH_KEYS = ["observation", "action", ("next", "observation"), ("next", "reward"), ("next", "done"),
               ("next", "terminated"), ("next", "truncated")]
+PRIVILEGED_KEYS = [PRIVILEGED, ("next", PRIVILEGED)]  # policy.critic_obs=privileged: the critic's input
 
 
 class Collection:
@@ -59,12 +61,16 @@ class Collection:
         self.multi = c.workers > 1 or bool(c.distributed)
         collector_class, steps = collector_class_of(backend)  # the classes registered in collectors/choice.py
         policy = ac.actor if steps == "actor" else sampling_policy(ac)  # FastCollector reads the actor's net
-        env_kwargs = dict(clip_actions=ac.head == "normal", gamma=cfg.advantage.gamma)
+        self.privileged = cfg.policy.get("critic_obs", "observation") == "privileged"
+        self._keys = BATCH_KEYS + (PRIVILEGED_KEYS if self.privileged else [])
+        env_kwargs = dict(clip_actions=ac.head == "normal", gamma=cfg.advantage.gamma, privileged=self.privileged)
         common = dict(frames_per_batch=c.frames_per_batch, total_frames=-1, policy_device=device,
                       env_device="cpu", storing_device=device)
         # In one process, the env the collector steps; with workers, the main process's copy of the
         # transforms that holds the merged statistics (never stepped).
-        self.env = make_torchrl_env(cfg.env, num_envs=c.num_envs, seed=seed, first_env=first_env,
+        # (a Playground task's main copy is not reset: its EnvPool, seconds and ~55 MB an env, is built in the workers)
+        main_seed = None if self.multi and cfg.env.get("playground") is not None else seed
+        self.env = make_torchrl_env(cfg.env, num_envs=c.num_envs, seed=main_seed, first_env=first_env,
                                     threads=c.physics_threads if not self.multi else 1, **env_kwargs)
         self.state = env_state_of(self.env)
         self._key = env_state_key(self.env)
@@ -107,7 +113,7 @@ class Collection:
         # one env: [steps]; batched envs: [num_envs, steps]; workers add a leading dim: all -> [envs, steps]
         batch = batch.reshape(-1, batch.shape[-1])
         self._record_episodes(batch)
-        return batch.select(*BATCH_KEYS)
+        return batch.select(*self._keys)
 
     def _record_episodes(self, batch: TensorDict) -> None:
         done = batch.get(("next", "done")).squeeze(-1)
@@ -182,6 +188,8 @@ class Collection:
         reward = self.state.reward_norm.state_dict()
         state = {"obs": self.obs_stats(), "obs_frozen": self.state.obs_norm.frozen,
                  "return": {k: reward[k] for k in ("mean", "var", "count")}}
+        if self.state.privileged_norm is not None:  # the critic's input's statistics (policy.critic_obs=privileged)
+            state["privileged"] = self.state.privileged_norm.state_dict()
         # TorchRL's Collector keeps its policy's weights in it (its load_state_dict needs them); FastCollector not
         state["collector"] = self._collector_state()
         return state
@@ -193,6 +201,8 @@ class Collection:
             norm.load_state_dict({**obs, "frozen": bool(state.get("obs_frozen", norm.frozen))})
         if state.get("return") is not None:
             self.state.reward_norm.load_state_dict(state["return"], running=False)
+        if state.get("privileged") is not None and self.state.privileged_norm is not None:
+            self.state.privileged_norm.load_state_dict(state["privileged"])
         if state.get("collector") is not None:
             if any(env_snapshot(part, self._key) is None for part in worker_parts(state["collector"])):
                 raise ConfigError("this checkpoint was written by an earlier version of ppo_torchrl, before the env's "

@@ -29,7 +29,7 @@ def is_ray_running() -> bool:
 
 
 def worker_env(env_cfg: dict, clip_actions: bool, gamma: float, num_envs: int, obs_stats: Optional[dict],
-               seed: int):
+               seed: int, privileged: bool = False):
     """A worker's env, built in the worker: a plain dict config so that it pickles (under
     functools.partial). The main process alone answers signals: a Ctrl-C reaches the whole process
     group, and the workers must finish the batch the main process saves."""
@@ -38,7 +38,8 @@ def worker_env(env_cfg: dict, clip_actions: bool, gamma: float, num_envs: int, o
             signal.signal(signum, signal.SIG_IGN)
     quiet_mujoco()  # a spawned worker is a fresh process: MuJoCo's deprecation notices would print again here
     return make_torchrl_env(OmegaConf.create(env_cfg), clip_actions=clip_actions, gamma=gamma, obs_stats=obs_stats,
-                            train=True, device="cpu", num_envs=num_envs, seed=seed, threads=1)  # a core a worker
+                            train=True, device="cpu", num_envs=num_envs, seed=seed, threads=1,  # a core a worker
+                            privileged=privileged)
 
 
 def make_multi_collector(c, make_env: list, policy, collector_class: type, kwargs: dict):

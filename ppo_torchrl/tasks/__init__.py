@@ -5,7 +5,8 @@ recipe in robots/recipe.py), a terrain, a command, the contact sensors, one epis
 terms, stepped as one batched env (`LeggedBatchEnv`, N robots of one model, physics in C++ outside the GIL).
 """
 
-FIGURES = {"locomotion": "ppo_torchrl.tasks.locomotion.figures"}  # an evaluation record's kind -> its figures
+FIGURES = {"locomotion": "ppo_torchrl.tasks.locomotion.figures",
+           "playground": "ppo_torchrl.tasks.playground_figures"}  # an evaluation record's kind -> its figures
 
 
 def figures_module(kind):
