@@ -83,7 +83,7 @@ def test_the_auto_reset_step_never_enters_a_batch_and_each_episodes_reward_terms
     ac, collection = collection_of(cfg)
     terms = [k[len("info:reward_"):] for k in envpool.make_spec(GO1).state_array_spec if k.startswith("info:reward_")]
     try:
-        assert collection.metric_columns() == [f"reward/{t}" for t in terms] + ["command/speed", "command/yaw_rate"]
+        assert collection.metric_keys() == [f"reward/{t}" for t in terms] + ["command/speed", "command/yaw_rate"]
         collection.collector._current_obs()
         pool = collection.collector.shared.pool
         calls = []

@@ -51,6 +51,8 @@ from ppo_torchrl.models import sampling_policy
 BATCH_KEYS = ["observation", "action", ("next", "observation"), ("next", "reward"), ("next", "done"),
               ("next", "terminated"), ("next", "truncated")]
 PRIVILEGED_KEYS = [PRIVILEGED, ("next", PRIVILEGED)]  # policy.critic_obs=privileged: the critic's input
+# the collectors that write them (env_rows.py: how another env kind feeds the critic)
+PRIVILEGED_WRITERS = ("playground",)
 
 
 class Collection:
@@ -62,6 +64,9 @@ class Collection:
         collector_class, steps = collector_class_of(backend)  # the classes registered in collectors/choice.py
         policy = ac.actor if steps == "actor" else sampling_policy(ac)  # FastCollector reads the actor's net
         self.privileged = cfg.policy.get("critic_obs", "observation") == "privileged"
+        if self.privileged and backend not in PRIVILEGED_WRITERS:  # an env may declare one its collector cannot write
+            raise ConfigError(f"policy.critic_obs=privileged: collector.backend={backend} writes no privileged "
+                              f"observation into its batches (those that do: {', '.join(PRIVILEGED_WRITERS)})")
         self._keys = BATCH_KEYS + (PRIVILEGED_KEYS if self.privileged else [])
         env_kwargs = dict(clip_actions=ac.head == "normal", gamma=cfg.advantage.gamma, privileged=self.privileged)
         common = dict(frames_per_batch=c.frames_per_batch, total_frames=-1, policy_device=device,
