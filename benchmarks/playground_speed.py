@@ -8,7 +8,8 @@ Why: issue 74's goal compares a run's frames/s with the task's raw EnvPool rate 
   compile off so that a short run's figure has no compile in it), the app's own frames/s from summary.json.
 Each figure twice: per second of wall time (what a busy machine's scheduler gave) and per second of CPU time (the
 process's, all its threads: EnvPool's C++ ones too), which another process's load changes far less; a run's CPU
-time is its whole process's (start-up included), so its per-CPU-second figure is a lower bound.
+time is its whole process's (start-up included), so its per-CPU-second figure is a lower bound; --marginal adds a run
+of 3x the frames and reports the extra frames over the extra CPU seconds (the start-up cancels).
 
     python benchmarks/playground_speed.py                        # Go1JoystickFlatTerrain-v1, envs 8,32 x threads 1,2
     python benchmarks/playground_speed.py --steps 40000 --frames 65536 --no-run
@@ -25,11 +26,13 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
-
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
-import ppo_torchrl  # noqa: E402,F401  (first: it puts numpy's OpenBLAS on one thread, as the app runs it)
+# before numpy: ppo_torchrl puts numpy's OpenBLAS on one thread as the app runs it (read when numpy loads it; numpy
+# imported first gave the collector's 512-wide numpy policy many threads, a tenth of its frames/s on a busy machine)
+import ppo_torchrl  # noqa: E402,F401
+
+import numpy as np  # noqa: E402
 
 
 def raw_rate(task: str, num_envs: int, threads: int, steps: int) -> float:
@@ -106,6 +109,8 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=40_000, help="raw env steps per case")
     parser.add_argument("--frames", type=int, default=65_536, help="collector and run frames per case")
     parser.add_argument("--no-run", action="store_true", help="raw and collector rates only")
+    parser.add_argument("--marginal", action="store_true",
+                        help="also a run of 3x the frames: the run's frames per CPU second without its start-up")
     parser.add_argument("--rounds", type=int, default=1, help="each case this many times, the cases alternated")
     args = parser.parse_args()
     for round_ in range(args.rounds):
@@ -116,6 +121,11 @@ def main() -> None:
                        "collector_frames": collector_rate(args.task, n, threads, args.frames)}
                 if not args.no_run:
                     row["run"] = run_rate(args.task, n, threads, args.frames)
+                    if args.marginal:  # a second, longer run: its extra frames over its extra CPU time, no start-up
+                        longer = run_rate(args.task, n, threads, 3 * args.frames)
+                        row["run_3x"] = longer
+                        row["run_marginal_frames_per_cpu_s"] = round(
+                            (longer["frames"] - row["run"]["frames"]) / (longer["process_cpu_s"] - row["run"]["process_cpu_s"]))
                 row["load_average"] = [round(v, 2) for v in os.getloadavg()]
                 print(json.dumps(row), flush=True)
 
