@@ -3,8 +3,9 @@
 
     python3 .ci/records_check.py [repo dir]
 
-Fails (exit 1, one line per finding) when a tracked file is over 1 MB and not on .ci/large_files.txt, or when the
-tracked tree is over 40 MiB (what `git ls-files -z | xargs -0 du -cb` sums). `make test` runs it on every
+Fails (exit 1, one line per finding) when a tracked file is over 1 MB and not on .ci/large_files.txt, when the
+tracked tree is over 40 MiB (what `git ls-files -z | xargs -0 du -cb` sums), or when results/ tracks code (a .py file:
+results/ holds records; the scripts that made them live in benchmarks/). `make test` runs it on every
 submission (tests/test_records.py), so CI fails on either.
 """
 
@@ -34,6 +35,8 @@ def findings(repo: Path) -> list:
     ok = allowed(repo)
     out = [f"{name} is {size / 1e6:.1f} MB (limit 1 MB): keep it out of git, or add it to .ci/large_files.txt with why"
            for name, size in sorted(sizes.items()) if size > FILE_LIMIT and name not in ok]
+    out += [f"{name} is code under results/, which holds records: move it to benchmarks/ (and fix what names it)"
+            for name in sorted(sizes) if name.startswith("results/") and name.endswith(".py")]
     total = sum(sizes.values())
     if total > TREE_LIMIT:
         out.append(f"the tracked tree is {total / 2**20:.1f} MiB (budget 40 MiB): results/ keeps records, not run "

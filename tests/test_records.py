@@ -112,3 +112,16 @@ def test_the_records_command_refuses_bad_input_in_one_line(tmp_path):
     out = subprocess.run([sys.executable, "-m", "ppo_torchrl.records", str(tmp_path / "missing.csv")],
                          capture_output=True, text=True, cwd=ROOT)
     assert out.returncode == 2 and out.stderr.strip().count("\n") == 0 and out.stderr.startswith("error: ")
+
+
+def test_code_under_results_fails_the_check(tmp_path):
+    """Issue 76 item 4: results/ holds records, not code (seven scripts there imported the package); a tracked .py
+    under results/ is a finding, one beside it in benchmarks/ is not."""
+    check = records_check()
+    git(tmp_path, "init", "-q")
+    for name in ("results/robots/run/plot.py", "benchmarks/plot.py", "results/robots/run/table.md"):
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).write_text("import ppo_torchrl\n")
+    git(tmp_path, "add", ".")
+    found = check.findings(tmp_path)
+    assert len(found) == 1 and found[0].startswith("results/robots/run/plot.py is code under results/"), found

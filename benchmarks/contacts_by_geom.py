@@ -1,6 +1,6 @@
 """Which robot geoms other than the feet touch the ground, per control step, in one deterministic episode
 of quadruped_realistic_200k (checkpoint last, eval seed 0). Run from the repo root:
-    python results/robots/quadruped_realistic_200k/contacts_by_geom.py <run dir>
+    python benchmarks/contacts_by_geom.py <run dir>
 """
 import collections
 import sys

@@ -1,7 +1,7 @@
 """env=quadruped_a1like before training: heading=auto, the feet found, 5 s under zero action from reset
 (seed 0), and the forward velocity when pushed along the nose with heading=auto and with heading=x.
 Run from the repo root:
-    python results/robots/a1like_smoke/stand_check.py
+    python benchmarks/a1like_stand_check.py
 """
 from pathlib import Path
 
@@ -11,7 +11,7 @@ from hydra import compose, initialize_config_dir
 import ppo_torchrl.config  # noqa: F401  (registers the schemas)
 from ppo_torchrl.envs import make_gym_env
 
-CONF = str(Path(__file__).resolve().parents[3] / "conf")
+CONF = str(Path(__file__).resolve().parents[1] / "conf")
 
 
 def env_of(*overrides):

@@ -1,13 +1,14 @@
-"""The README's tables from <run>/height_sweep.csv here, beside the reported sweep's
-../quadruped_step_2026-11-25/<run>_sweep/height_sweep.csv (its success_rate was 'beyond the line at the end').
+"""results/robots/honest_outcomes_2026-11-25/README.md's tables from <run>/height_sweep.csv there, beside the reported
+sweep's results/robots/quadruped_step_2026-11-25/<run>_sweep/height_sweep.csv (its success_rate was 'beyond the line at
+the end'). (Moved from that folder in round 6, issue 76: results/ holds records, not code.)
 
-    python table.py ft_q10r ft_q8r ft_q9 ...
+    python benchmarks/honest_outcomes_table.py ft_q10r ft_q8r ft_q9 ...
 """
 import csv
 import sys
 from pathlib import Path
 
-HERE = Path(__file__).parent
+HERE = Path(__file__).resolve().parents[1] / "results" / "robots" / "honest_outcomes_2026-11-25"
 OLD = HERE.parent / "quadruped_step_2026-11-25"
 
 

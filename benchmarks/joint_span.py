@@ -1,7 +1,7 @@
 """How far the joints of env=quadruped and env=quadruped_a1like move: each model's compiled joint range
 (first leg), the largest |joint angle| of the first leg in a 200-step random-action rollout (seed 0),
 and the trunk's height after 5 s with the actuators off. Run from the repo root:
-    python results/robots/a1like_smoke/joint_span.py
+    python benchmarks/joint_span.py
 """
 from pathlib import Path
 
@@ -12,7 +12,7 @@ from hydra import compose, initialize_config_dir
 import ppo_torchrl.config  # noqa: F401  (registers the schemas)
 from ppo_torchrl.envs import ASSETS_DIR, make_gym_env
 
-CONF = str(Path(__file__).resolve().parents[3] / "conf")
+CONF = str(Path(__file__).resolve().parents[1] / "conf")
 
 for name, xml in (("quadruped", "quadruped.xml"), ("quadruped_a1like", "quadruped_a1like.xml")):
     with initialize_config_dir(config_dir=CONF, version_base="1.3"):

@@ -1,4 +1,4 @@
-"""Curriculum curves of step runs: python plot_curriculum.py <out.png> <run dir>... (each with a metrics.csv)."""
+"""Curriculum curves of step runs: python benchmarks/plot_curriculum.py <out.png> <run dir>... (each with a metrics.csv)."""
 
 import csv
 import sys
