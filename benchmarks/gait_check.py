@@ -13,14 +13,17 @@ eval env, read after every control step as the sweeps read them:
 
     .venv/bin/python benchmarks/gait_check.py <run dir> [...] [--seed 60] [--episodes 10] [--out <table.md>]
 
-Episode seeds are `seed*1000 + i` as in `evaluate seed=` (60 -> 60000-60009, a sweep's first ten).
+Episode seeds are `seed*1000 + i` as in `evaluate seed=` (60 -> 60000-60009, a sweep's first ten). Bad input (a
+missing dir, a run that is not env=legged, --episodes 0, a directory as --out) is one `error:` line and exit 2, before
+any episode runs or anything is written (cli_args.py).
 """
 
-import argparse
 import sys
 from pathlib import Path
 
 import numpy as np
+from cli_args import ConfigError, Parser, existing_dir, out_file, positive_int, seed
+from cli_args import run as run_main
 
 import ppo_torchrl
 from ppo_torchrl.envs import episode_seeds, make_gym_env
@@ -29,8 +32,17 @@ from ppo_torchrl.robots.gait import CORNERS, FOOT_PAIRS
 PATTERNS = {"trot": "diagonal", "pace": "same_side", "bound": "same_end"}  # one pair down, the other pair up
 
 
-def check(run: Path, seed: int, episodes: int) -> dict:
+def legged_policy(run: Path):
+    """The run's last checkpoint as a policy, or one line: a run of another kind has no robot read from its model."""
     policy = ppo_torchrl.load(run, checkpoint="last")
+    if policy.config.env.get("legged") is None or not policy.config.env.get("xml_file"):
+        raise ConfigError(f"{run} is a run of {policy.config.env.id}, not of env=legged: gait_check reads the feet of "
+                          "a robot read from its model (a run of experiment=legged_trot_v2, make robot)")
+    return policy
+
+
+def check(run: Path, seed: int, episodes: int, policy=None) -> dict:
+    policy = policy or legged_policy(run)
     env_cfg = policy.config.env
     env_cfg.terrain.step_height = 0.0
     env = make_gym_env(env_cfg, evaluation=True)
@@ -70,14 +82,15 @@ def check(run: Path, seed: int, episodes: int) -> dict:
     return row
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("runs", nargs="+", type=Path)
-    parser.add_argument("--seed", type=int, default=60)
-    parser.add_argument("--episodes", type=int, default=10)
-    parser.add_argument("--out", type=Path, default=None)
-    args = parser.parse_args()
-    rows = [check(run, args.seed, args.episodes) for run in args.runs]
+def main(argv=None) -> int:
+    parser = Parser(description=__doc__.splitlines()[0])
+    parser.add_argument("runs", nargs="+", type=existing_dir)
+    parser.add_argument("--seed", type=seed, default=60)
+    parser.add_argument("--episodes", type=positive_int, default=10)
+    parser.add_argument("--out", type=out_file, default=None)
+    args = parser.parse_args(argv)
+    policies = [legged_policy(run) for run in args.runs]  # every run's kind, before any episode
+    rows = [check(run, args.seed, args.episodes, policy) for run, policy in zip(args.runs, policies)]
     columns = list(rows[0])
     lines = [f"Gait check: `python benchmarks/gait_check.py {' '.join(str(r) for r in args.runs)} --seed {args.seed} "
              f"--episodes {args.episodes}`; flat ground, deterministic, episode seeds {args.seed * 1000}-"
@@ -89,7 +102,8 @@ def main() -> None:
     print(text, end="")
     if args.out:
         args.out.write_text(text)
+    return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_main(main))

@@ -20,15 +20,17 @@ the step, a fall, short of the line at the time limit, or across and then ended)
 missed 0.25 l goal is made of.
 --curves <png>: each run's training curves (metrics.csv or its .xz): the train return, the in-training eval's success
 at 0.25 l, the curriculum's step and the policy's std.
+Bad input (a missing dir, a run that is not env=legged, a sweep dir without a height sweep, a malformed --goal, a
+directory as --out or --curves) is one `error:` line and exit 2, before anything is written (cli_args.py).
 """
 
-import argparse
 import math
 import sys
 from collections import Counter
 from pathlib import Path
 
-from omegaconf import OmegaConf
+from cli_args import ConfigError, Parser, goal, out_file
+from cli_args import run as run_main
 from robot_row import CURVES, SHARE, STRIDE_HZ, SWING_S, curves, load, long_swings
 
 from ppo_torchrl.envs import resolve_model_file
@@ -44,9 +46,28 @@ PANELS = (CURVES[0], CURVES[2], CURVES[3], ("policy/scale_mean", "the policy's s
 
 
 def robot_of(run_dir: Path):
+    """The robot a run trained on, read again from its model; one line for a dir that is not a legged run."""
+    from ppo_torchrl.config_data import read_config
+
     saved = run_dir / ".hydra" / "config.yaml"  # a tuning record keeps the run's config.yaml only
-    cfg = OmegaConf.load(saved if saved.is_file() else run_dir / "config.yaml")
-    return read_robot(resolve_model_file(cfg.env.xml_file), cfg.env.legged.keyframe)
+    saved = saved if saved.is_file() else run_dir / "config.yaml"
+    if not run_dir.is_dir():
+        raise ConfigError(f"{run_dir}: no such run dir")
+    if not saved.is_file():
+        raise ConfigError(f"{run_dir} is not a ppo_torchrl run dir (no config.yaml)")
+    env = read_config(saved).env  # data only: nothing in it is resolved (config_data.py)
+    if env.get("legged") is None or not env.get("xml_file"):
+        raise ConfigError(f"{run_dir} is a run of {env.get('id')}, not of env=legged: the table's rows are robots read "
+                          "from their model (make robot)")
+    return read_robot(resolve_model_file(env.xml_file), env.legged.keyframe)
+
+
+def sweep_of(path: Path) -> Path:
+    """A sweep dir that holds evaluate heights='s files, or one line."""
+    if not has_record(path / "height_sweep.json") or not has_record(path / "height_sweep_episodes.csv"):
+        raise ConfigError(f"{path} holds no height sweep (height_sweep.json and height_sweep_episodes.csv, written by "
+                          "python -m ppo_torchrl.evaluate ... heights=... out=<it>)")
+    return path
 
 
 def in_legs(sweep: dict, l: float) -> dict:
@@ -141,35 +162,36 @@ def rows(entries: list, goals: dict, issue: int = 46) -> str:
     return "\n".join(out) + "\n"
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def main(argv=None) -> int:
+    parser = Parser(description=__doc__.splitlines()[0])
     parser.add_argument("robots", nargs="+", help="<robot dir>[:<sweep dir>]")
     parser.add_argument("--sweep", default="sweep", help="the sweep's folder in each robot dir")
-    parser.add_argument("--goal", nargs="*", default=[], help="<robot>=<share at 0.25 l>, e.g. go1=0.9")
+    parser.add_argument("--goal", nargs="*", type=goal, default=[], help="<robot>=<share at 0.25 l>, e.g. go1=0.9")
     parser.add_argument("--goals", type=int, choices=(46, 59), default=46, help="whose goals: issue 46's or 59's")
-    parser.add_argument("--out", type=Path)
-    parser.add_argument("--curves", type=Path, help="write each run's training curves here (PNG, one line per run)")
-    args = parser.parse_args()
-    if args.curves:
-        curves([Path(r.partition(":")[0]) for r in args.robots], args.curves, PANELS)
-    goals = {k: float(v) for k, _, v in (g.partition("=") for g in args.goal)}
+    parser.add_argument("--out", type=out_file)
+    parser.add_argument("--curves", type=out_file, help="write each run's training curves here (PNG, one line per run)")
+    args = parser.parse_args(argv)
+    goals = dict(args.goal)
     entries, left_out = [], []
-    for given in args.robots:
+    for given in args.robots:  # every input read (and refused in one line) before anything is written
         run, _, sweep = given.partition(":")
         run = Path(run)
+        robot = robot_of(run)
         if not (Path(sweep) if sweep else run / args.sweep).is_dir():
+            if sweep:
+                raise ConfigError(f"{given}: the sweep dir {sweep} does not exist")
             left_out.append(run)
             continue
-        robot = robot_of(run)
-        worlds = [load(run / folder, ".") if (run / folder).is_dir() else None for _, folder in WORLDS]
+        worlds = [load(sweep_of(run / folder), ".") if (run / folder).is_dir() else None for _, folder in WORLDS]
         entries.append((run.name if args.goals == 59 else robot.name, robot,
-                        load(Path(sweep) if sweep else run / args.sweep, "."), worlds, run))
+                        load(sweep_of(Path(sweep) if sweep else run / args.sweep), "."), worlds, run))
+    if args.curves:
+        curves([Path(r.partition(":")[0]) for r in args.robots], args.curves, PANELS)
     if not entries:  # no table to make: the curves (read from the runs' metrics) were all that could be asked
         if args.curves:
             return 0
-        print(f"error: none of the {len(args.robots)} run(s) given has its sweep ({args.sweep}/ or <run>:<sweep dir>)",
-              file=sys.stderr)
-        return 2
+        raise ConfigError(f"none of the {len(args.robots)} run(s) given has its sweep ({args.sweep}/ or "
+                          "<run>:<sweep dir>)")
     for run in left_out:
         print(f"{run}: no sweep yet, left out (make robot sweeps a run when it ends)", file=sys.stderr)
     text = rows(entries, goals, args.goals)
@@ -180,4 +202,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_main(main))

@@ -18,6 +18,8 @@
   thread, its reset step included) and each app row's share is of its own env kind's raw rate.
 Prints and writes (--out/table.md): wall time, the ratio, the in-loop rate, the share of the raw env
 step rate, peak RSS, and the wall-clock time until the last-100 train return first reaches --score.
+Bad input (--frames 0 or below, a file as --out, a backend that is not one) is one `error:` line and exit 2, before
+anything runs or is written (cli_args.py).
 """
 
 from __future__ import annotations
@@ -34,8 +36,12 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "benchmarks"))
+from cli_args import Parser, finite, out_dir, positive_int, seed  # noqa: E402
+from cli_args import run as run_main  # noqa: E402
 from envpool_speed import envpool_rate  # noqa: E402
 from speed import raw_env_rate  # noqa: E402
+
+BACKENDS = ("fast", "envpool", "auto", "torchrl")
 
 # conf/env/Hopper-v4.yaml's tuned values, in SB3's terms (checked against the file at start).
 TUNED = {"gamma": 0.995, "clip_range": 0.1, "learning_rate": 1e-4, "width": 128}
@@ -89,22 +95,24 @@ def time_to_score_sb3(out: Path, score: float):
     return None
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--frames", type=int, default=1_000_000)
-    parser.add_argument("--score", type=float, default=2000.0)
+def main(argv=None) -> int:
+    parser = Parser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--frames", type=positive_int, default=1_000_000)
+    parser.add_argument("--score", type=finite, default=2000.0)
     parser.add_argument("--tuned", action="store_true", help="env=Hopper-v4 (tuned) and SB3 with the same values")
     parser.add_argument("--sequential", action="store_true", help="A then B, each alone on the machine")
-    parser.add_argument("--seed", type=int, default=1, help="the seed of both sides (the app's seed=, SB3's seed)")
-    parser.add_argument("--out", type=Path, default=ROOT / "results" / "speed" / "whole_run")
+    parser.add_argument("--seed", type=seed, default=1, help="the seed of both sides (the app's seed=, SB3's seed)")
+    parser.add_argument("--out", type=out_dir, default=ROOT / "results" / "speed" / "whole_run")
     parser.add_argument("--backends", default="fast", help="the app's collector.backend, one run each (fast,envpool)")
     parser.add_argument("--sb3-child", type=Path, help=argparse.SUPPRESS)
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     backends = [b for b in args.backends.split(",") if b]
-    if not backends or set(backends) - {"fast", "envpool", "auto", "torchrl"} or (len(backends) > 1 and not args.sequential):
-        raise SystemExit("error: --backends takes fast, envpool, auto or torchrl; more than one needs --sequential")
+    if not backends or set(backends) - set(BACKENDS) or (len(backends) > 1 and not args.sequential):
+        parser.error(f"argument --backends: {args.backends!r}: takes {', '.join(BACKENDS)}; more than one needs "
+                     "--sequential")
     if args.sb3_child:
-        return sb3_child(args.frames, args.sb3_child, args.tuned, args.seed)
+        sb3_child(args.frames, args.sb3_child, args.tuned, args.seed)
+        return 0
 
     stamp = time.strftime("%Y-%m-%d_%H-%M-%S")
     work = ROOT / "outputs" / "bench_whole_run" / stamp
@@ -183,7 +191,8 @@ def main() -> None:
     shutil.copy(next(sb3_dir.glob("*.monitor.csv")), args.out / "sb3_monitor.csv")
     (args.out / "table.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(run_main(main))

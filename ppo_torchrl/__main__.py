@@ -19,8 +19,8 @@ from typing import Optional
 from ppo_torchrl import signals
 from ppo_torchrl.errors import EXIT_SIGNAL, guarded, signal_in_chain
 from ppo_torchrl.compose import CONF_DIR, compose, hydra_value, register_resolvers, show_job
-from ppo_torchrl.overrides import (HELP_FLAGS, INFO_FLAGS, check_env_override, check_values, route_paths,
-                                   split_args, unquote, whole_counts, with_override)
+from ppo_torchrl.overrides import (HELP_FLAGS, INFO_FLAGS, checked_overrides, plain_keys, split_args, unquote,
+                                   with_override)
 from ppo_torchrl.lifecycle import Lifecycle, Start
 from ppo_torchrl.sweeps import (announce_study, dry_run, fail_running_trials, hydra_overrides, job_dirs, objective,
                                 run_seeds, stored_study, sweep_done, sweep_jobs)
@@ -78,11 +78,10 @@ def prepare(argv: list[str], life: Optional[Lifecycle] = None) -> list[str]:
     flags, overrides = split_args(argv)
     if any(f in HELP_FLAGS for f in flags):
         return argv
-    check_values(overrides)  # resume= with an empty value, ~seed: one line, before anything else
-    resume = next((unquote(o.split("=", 1)[1]) for o in overrides if o.startswith("resume=")), None)
-    argv, overrides = route_paths(argv), route_paths(overrides)
-    check_env_override(overrides)
-    argv, overrides = whole_counts(argv, overrides, compose)  # collector.total_frames=1e6: the int it is
+    resume = next((unquote(o.split("=", 1)[1]) for o in plain_keys(overrides) if o.startswith("resume=")), None)
+    # the checks the API runs too: ++key as key, empty paths, ~seed, env=, 1e6 as an int: one line, before anything else
+    overrides = checked_overrides(overrides, compose)
+    argv = [*flags, *overrides]
     multirun = "-m" in flags or "--multirun" in flags
     jobs = sweep_jobs(overrides) if multirun else [overrides]
     hydra_cfg = compose(jobs[0] + hydra_overrides(overrides), with_hydra=True) if multirun else None

@@ -11,12 +11,15 @@ from pathlib import Path
 from typing import Any, Dict, Optional, Tuple
 
 from ppo_torchrl.errors import ConfigError
-from ppo_torchrl.overrides import SCIENTIFIC, closest
+from ppo_torchrl.overrides import SCIENTIFIC, check_path, closest
 
 TRUE, FALSE = {"true", "1", "yes"}, {"false", "0", "no"}
 LATEST = "latest"  # run=latest: the newest run dir under OUTPUTS; run=latest/<env>: the newest of that env
 OUTPUTS = Path("outputs")  # where runs go by default (conf/config.yaml: hydra.run.dir, hydra.sweep.dir)
 NEEDS = ("hydra", "omegaconf", "torch", "torchrl", "gymnasium", "mujoco")  # what a wrong interpreter lacks
+PATH_ARGS = ("run", "out")  # evaluate's and export's paths: checked as the training command's (overrides.check_path)
+MAX_EPISODES = 10**6  # a million episodes of a thousand steps run for days: a larger count is a typo
+SEED_LIMIT = 2**32  # episode i starts from seed * 1000 + i, a 32-bit seed
 
 
 def parse_args(argv: list[str], spec: Dict[str, Any], usage: str, help: Optional[Dict[str, str]] = None,
@@ -47,10 +50,42 @@ def parse_args(argv: list[str], spec: Dict[str, Any], usage: str, help: Optional
                 values[key] = raw
         except ValueError:
             raise ConfigError(f"{key}={raw}: expected a {type(default).__name__}; usage: {usage}") from None
+        if key in PATH_ARGS and raw:  # out= empty means the default dir
+            check_path(key, raw, arg)
     missing = [k for k, v in values.items() if v is None]
     if missing:
         raise ConfigError(f"missing {', '.join(k + '=...' for k in missing)}; usage: {usage}")
     return values
+
+
+def whole(name: str, value, spelled: str = "") -> int:
+    """A count or a seed given to the Python API as the CLI takes it: an int (or a float that is a whole number, as
+    1e3); a bool, a fraction, an infinity or a string is one ConfigError line, never rounded or taken as 1."""
+    import numbers
+
+    spelled = spelled or f"{name}={value!r}"
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise ConfigError(f"{spelled} must be a whole number (an int), not {type(value).__name__}")
+    if isinstance(value, numbers.Integral):
+        return int(value)
+    if not (float(value).is_integer()):  # a fraction, inf or nan
+        raise ConfigError(f"{spelled} must be a whole number (an int): it is not rounded")
+    return int(value)
+
+
+def check_episodes(episodes, seed, who: str = "") -> tuple:
+    """evaluate's episodes= and seed= (the CLI's and evaluate_run()'s one check): (episodes, seed) as ints, or one
+    ConfigError line: episodes in 1..MAX_EPISODES, every episode seed (seed * 1000 + i) in [0, 2^32)."""
+    episodes, seed = whole("episodes", episodes, f"{who}episodes={episodes!r}"), whole("seed", seed, f"{who}seed={seed!r}")
+    if episodes < 1:
+        raise ConfigError(f"{who}episodes={episodes} must be >= 1")
+    if episodes > MAX_EPISODES:
+        raise ConfigError(f"{who}episodes={episodes} must be at most {MAX_EPISODES:,} (a million episodes of a "
+                          "thousand steps run for days)")
+    if not 0 <= seed * 1000 + episodes < SEED_LIMIT:
+        raise ConfigError(f"{who}seed={seed} must be in 0..{(SEED_LIMIT - episodes) // 1000}: episode i starts "
+                          "from seed * 1000 + i")
+    return episodes, seed
 
 
 def print_help(usage: str, arguments: Dict[str, Tuple[str, Any]], about: str = "") -> None:

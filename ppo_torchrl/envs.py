@@ -114,8 +114,9 @@ def resolve_model_file(xml_file: str) -> Path:
     moved = ASSETS_DIR / "menagerie" / path.parent.name / path.name
     if path.parent.name and moved.is_file():  # a run recorded before the Menagerie robots came into the package,
         return moved  # e.g. .../shared/robots/unitree_go1/scene.xml: the same file (results/README.md)
-    shipped = ", ".join(sorted(p.name for p in ASSETS_DIR.glob("*.xml")))
-    raise ConfigError(f"env.xml_file={xml_file}: no such file (a path, or a shipped model: {shipped})")
+    from ppo_torchrl.shipped import models_hint  # the six Menagerie robots first (issue 76)
+
+    raise ConfigError(f"env.xml_file={xml_file}: no such file (a path, or {models_hint()})")
 
 
 def _scaled_for_checks(env_cfg):

@@ -27,7 +27,7 @@ EXIT_ENVIRONMENT = 1  # the machine: a full disk, no permission, no file locks, 
 USER_FIXABLE = {errno.ENOSPC: "the disk is full", errno.EDQUOT: "the disk quota is used up",
                 errno.EFBIG: "a file reached the file size limit", errno.EACCES: None,
                 errno.EPERM: None, errno.EROFS: None, errno.ENOTDIR: None, errno.EISDIR: None,
-                errno.ENAMETOOLONG: None, errno.ENOLCK: None}
+                errno.ENAMETOOLONG: None, errno.ENOLCK: None, errno.ELOOP: None}
 EXIT_SIGNAL = {2: 130, 15: 143}  # interrupted: 128 + signal number, as shells report it
 
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 import copy
 import functools
 import math
+import sys
 from pathlib import Path
 from typing import Optional, Sequence
 
@@ -186,14 +187,16 @@ def apply_overrides(cfg, overrides: list[str]):
         try:
             cfg = OmegaConf.merge(cfg, OmegaConf.from_dotlist([override]))
         except Exception as exc:  # omegaconf: an unknown key or a value of the wrong type
-            raise ConfigError(f"cannot apply '{override}' to the run's config: {str(exc).splitlines()[0]}") from None
-    for ok, message in env_checks(cfg.env):
-        if not ok:
-            raise ConfigError(message)
+            from ppo_torchrl.overrides import key_hint  # a misspelt key: the closest one
+
+            raise ConfigError(f"cannot apply '{override}' to the run's config: {str(exc).splitlines()[0]}"
+                              f"{key_hint(override.partition('=')[0], cfg)}") from None
+    from ppo_torchrl.env_values import check_env
+
+    check_env(cfg.env)  # as training checks it: finite, in range, named as typed (env_values.py)
     return cfg
 
 
-MAX_EPISODES = 10**6
 TRACKING_FILES = ("tracking.json", "tracking.md", "tracking.png")
 
 
@@ -228,7 +231,7 @@ def tracking_eval(cfg, ac, obs_stats, args: dict, out_dir: Path, run_dir: Path, 
 def main(argv: list[str]) -> dict:
     from ppo_torchrl.checkpoint import check_same_env, check_spec, load_policy, resolve_checkpoint
     from ppo_torchrl.checkpoint import label as checkpoint_label
-    from ppo_torchrl.cli import parse_args, resolve_run
+    from ppo_torchrl.cli import check_episodes, parse_args, resolve_run
     from ppo_torchrl.envs import env_spec
     from ppo_torchrl.model_record import check_model
     from ppo_torchrl.ownership import holder
@@ -238,14 +241,7 @@ def main(argv: list[str]) -> dict:
     usage, spec, help, about = EVALUATE  # usage.py: --help answers before torch is imported
     overrides = [arg for arg in argv if arg.startswith("env.")]
     args = parse_args([arg for arg in argv if not arg.startswith("env.")], spec, usage, help, about)
-    if args["episodes"] < 1:
-        raise ConfigError(f"episodes={args['episodes']} must be >= 1")
-    if args["episodes"] > MAX_EPISODES:
-        raise ConfigError(f"episodes={args['episodes']} must be at most {MAX_EPISODES:,} (a million episodes of a "
-                          "thousand steps run for days)")
-    if not 0 <= args["seed"] * 1000 + args["episodes"] < 2**32:  # episode i's seed is seed * 1000 + i (32-bit)
-        raise ConfigError(f"seed={args['seed']} must be in 0..{(2**32 - args['episodes']) // 1000}: episode i starts "
-                          "from seed * 1000 + i")
+    check_episodes(args["episodes"], args["seed"])  # the one check evaluate_run() runs too (cli.py)
     from ppo_torchrl.tasks.locomotion import sweep  # heights=: the step task's own sweep
 
     heights = sweep.parse_heights(args["heights"]) if args["heights"] else None
@@ -271,6 +267,9 @@ def main(argv: list[str]) -> dict:
     checkpoint = resolve_checkpoint(run_dir, args["checkpoint"])  # best without a best.pt: last.pt, said so
     which = checkpoint_label(checkpoint)
     out_dir = Path(args["out"]) if args["out"] else output_dir_for(run_dir, run_dir / "eval")  # zoo: outputs/zoo/<name>
+    if not args["out"] and out_dir != run_dir / "eval":  # a shipped run (zoo/, results/) stays as it was shipped
+        print(f"note: {run_dir} is a shipped run; the eval's files go to {out_dir} (out=<dir> for another)",
+              file=sys.stderr, flush=True)
     why = unwritable(out_dir)  # before any episode runs
     if why:
         raise ConfigError(f"cannot write the eval's files in {out_dir}: {why}; give a writable dir with out=<dir>")
@@ -304,9 +303,15 @@ def main(argv: list[str]) -> dict:
         print(f"{label}: {out_dir / 'drive.mp4'}")
         return {"drive": segments}
     if heights:
+        if cfg.env.get("legged") is not None and any(h > 0 for h, _ in heights) and \
+                not any(legs or h >= 1 for h, legs in heights):  # every value below 1 m: 0.25 meant 0.25l?
+            top = max(h for h, _ in heights)
+            print(f"note: heights={args['heights']} are in m (the highest a {top * 100:g} cm step); in this robot's "
+                  f"leg lengths write an l: heights={','.join(f'{h:g}l' if h else '0' for h, _ in heights)}",
+                  file=sys.stderr, flush=True)
         heights = sweep.heights_in_metres(heights, cfg.env)
         rows = sweep.height_sweep(cfg, ac, obs_stats, heights, args["episodes"], args["seed"], out_dir,
-                            f"{run_dir.resolve().name}\n{label}", owner=run_dir, evaluate=evaluate_policy)
+                                  f"{run_dir.resolve().name}\n{label}", owner=run_dir, evaluate=evaluate_policy)
         print(f"{label}: height sweep over {args['episodes']} episodes per height: "
               f"{out_dir / sweep.SWEEP_FILES[0]}, {out_dir / sweep.SWEEP_FILES[1]}")
         record(run_dir, writes)  # in the run dir that holds them, however out= spells it

@@ -1,8 +1,9 @@
 """Export a trained policy as TorchScript: raw observation in, deterministic action out.
 
-    python -m ppo_torchrl.export run=<run dir> [checkpoint=best|last|<file>]
+    python -m ppo_torchrl.export run=<run dir> [checkpoint=best|last|<file>] [out=<dir>|<file>.pt]
 
-writes <run dir>/policy.pt. The module bakes in the frozen observation normalization and clipping
+writes <run dir>/policy.pt (out=: that dir's policy.pt, or that .pt file; a shipped run under zoo/ or results/:
+outputs/<its path>/policy.pt). The module bakes in the frozen observation normalization and clipping
 and the squashing (TanhNormal) or clipping (Normal) to the action bounds, so it runs anywhere
 torch runs: `torch.jit.load("policy.pt")(torch.as_tensor(obs, dtype=torch.float32))`, with any
 batch shape, no torchrl or ppo_torchrl needed.
@@ -72,6 +73,7 @@ def export_policy(cfg, ac: ActorCritic, obs_stats: Optional[dict], path: Path, o
 def main(argv: list[str]) -> Path:
     from ppo_torchrl.checkpoint import label, load_policy, resolve_checkpoint
     from ppo_torchrl.cli import parse_args, resolve_run
+    from ppo_torchrl.ownership import holder
     from ppo_torchrl.rundir import check_replaceable, is_run, output_dir_for, record, unwritable
     from ppo_torchrl.usage import EXPORT
 
@@ -80,8 +82,11 @@ def main(argv: list[str]) -> Path:
     run_dir = resolve_run(args["run"])  # run=latest[/<env>]: the newest run dir under outputs/
     read(run_dir)  # a shared lock: no overwrite or run starts there while this reads it (locks.py)
     checkpoint = resolve_checkpoint(run_dir, args["checkpoint"])  # best without a best.pt: last.pt, said so
-    target = output_dir_for(run_dir, run_dir) / "policy.pt"  # a shipped zoo folder: outputs/zoo/<name>/policy.pt
+    out = Path(args["out"]) if args["out"] else None  # out=<dir> (policy.pt in it) or out=<file>.pt
+    target = (out if out.suffix == ".pt" else out / "policy.pt") if out is not None else \
+        output_dir_for(run_dir, run_dir) / "policy.pt"  # a shipped run (zoo/, results/): under outputs/, its path
     check_replaceable(run_dir, [target])  # a policy.pt the app did not write is left alone
+    read(holder(target))  # out= in another run dir: that one is read (and written) too
     cfg, ac, state = load_policy(run_dir, str(checkpoint))
     why = unwritable(target.parent)
     if why:

@@ -51,6 +51,7 @@ class Lifecycle:
         self.start: Optional[Start] = None  # the single run this command claimed before Hydra started
         self.sweep_dir: Optional[Path] = None  # the sweep dir this command claimed
         self.study: Optional[dict] = None  # {storage, study_name}: the Optuna study a sweep runs
+        self.overrides: List[str] = []  # the command's key=value overrides where Hydra does not run (the API's train)
 
     # ------------------------------------------------------------ the command's steps
     def check(self, cfg, keep_env: bool = False):
@@ -295,10 +296,12 @@ def resume_config(run_dir, overrides, state: dict, announce: bool = False):
         try:
             cfg = OmegaConf.merge(cfg, OmegaConf.from_dotlist([override]))
         except Exception as exc:
+            from ppo_torchrl.overrides import key_hint  # a misspelt key: the closest one
+
             raise ConfigError(
                 f"resume: cannot apply '{override}' to the saved config ({str(exc).splitlines()[0]}); "
                 "on resume only key=value overrides of existing keys apply, e.g. collector.total_frames=N"
-            ) from exc
+                f"{key_hint(group, cfg)}") from exc
     cfg.resume = str(run_dir)
     return cfg
 

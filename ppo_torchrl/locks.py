@@ -5,6 +5,9 @@ A writer (a run, a resume, an overwrite: rundir.lock) takes the dir's `flock` ex
 shared. So an overwrite or a new run refuses while a reader holds the dir (it would get the old policy's
 eval.json in the new run's dir), readers run side by side, and a reader refuses while a run trains there.
 Nothing is written: the lock is on the dir's descriptor, released by the process's end, kill -9 included.
+`records` rewrites a run's own files (a record checkpoint in place, `metrics.csv.xz` beside its log): it holds the
+dir's lock exclusive (`hold`), so it refuses a run still training there (its record checkpoint would leave a run that
+cannot resume) and a reader, and a run cannot start there while it writes.
 """
 
 from __future__ import annotations
@@ -17,7 +20,7 @@ from typing import List, Optional
 
 from ppo_torchrl.errors import ConfigError
 
-_reading: List[int] = []  # descriptors holding a shared lock for the entry point now running
+_reading: List[int] = []  # descriptors holding a lock (shared; `hold`: exclusive) for the entry point now running
 
 
 def holder(directory: Path) -> str:
@@ -54,6 +57,25 @@ def read(directory: Optional[Path]) -> None:
             return  # this process writes there (a run that evaluates its own dir)
         raise ConfigError(f"{directory} is in use by {holder(directory)}, which is writing there (a run training, or one replacing "
                           "it); wait for it to end, then run this again") from None
+    except OSError:  # ENOLCK: a network filesystem without locks
+        os.close(fd)
+        return
+    _reading.append(fd)
+
+
+def hold(directory: Optional[Path], what: str) -> None:
+    """Hold `directory`'s lock exclusive until the entry point ends (`releasing` / `release_reads`), or refuse in one
+    line naming its holder: a command that rewrites a run's own files (records) while no run trains there and no
+    reader reads it. None (a file outside any run dir): nothing to hold."""
+    if directory is None or not Path(directory).is_dir():
+        return
+    fd = os.open(directory, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(fd)
+        raise ConfigError(f"{directory} is in use by {holder(directory)}; {what} only while no run trains there and "
+                          "nothing reads it: wait for it to end, then run this again") from None
     except OSError:  # ENOLCK: a network filesystem without locks
         os.close(fd)
         return

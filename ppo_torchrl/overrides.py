@@ -8,6 +8,7 @@ written `1e6` or `2e4` (taken as the integers they are where the config wants an
 from __future__ import annotations
 
 import difflib
+import errno
 import os
 import re
 from typing import Optional
@@ -32,6 +33,10 @@ HABITS = {"env_id": "env", "total_timesteps": "collector.total_frames", "n_times
 # Keys whose value is a path: passed to Hydra through an environment variable, so any character a path
 # may hold (a quote, a space, non-ASCII) reaches the app as typed, run after run and on resume.
 PATH_KEYS = ("resume", "init_from", "hydra.run.dir", "hydra.sweep.dir")
+# A model file's path goes the same way when Hydra's lexer would refuse it (a space, a non-ASCII letter, a quote): a
+# plain path, or a sweep's list of them (`-m env.xml_file=a.xml,b.xml`), stays Hydra's.
+MODEL_KEYS = ("env.xml_file",)
+PLAIN = re.compile(r"[A-Za-z0-9_./~+:@%-]*")
 PATH_ENV = "PPO_TORCHRL_PATH_{}"
 SCIENTIFIC = re.compile(r"[+]?\d+(?:\.\d*)?[eE][+]?\d+")  # 1e6, 2.5e5, 1E+6: a count if it is a whole number
 
@@ -66,20 +71,69 @@ EMPTY_MEANS = {"resume": "a new run would start", "init_from": "the run would tr
                "the working dir"}
 
 
-def check_values(overrides: list[str]) -> None:
-    """What Hydra would take without a word: a path key with nothing after '=' (an unset shell variable,
-    `resume=$RUN`) and `~key`, which deletes a key the app reads (Hydra's `~` is for defaults lists)."""
+def key_of(arg: str) -> str:
+    """An override's key without Hydra's prefixes (`+`, `++`, `~`)."""
+    return arg.partition("=")[0].lstrip("+~")
+
+
+def plain_keys(overrides: list[str]) -> list[str]:
+    """`++key=value` (Hydra's add-or-override) as `key=value` for the app's keys: every key of the schema is in the
+    config already, so `++` adds nothing there, and each check below sees the key as written (`++resume=<dir>`,
+    `++seed=-1`). Hydra's own `hydra.*` keys keep it (a new key of hydra.job.env_set needs it), the path keys aside."""
+    out = []
     for arg in overrides:
         key, sep, value = arg.partition("=")
-        if sep and key.lstrip("+") in PATH_KEYS and not unquote(value).strip():
-            name = key.lstrip("+")
-            what = "<run dir>" if name == "resume" else "<run dir or checkpoint>" if name == "init_from" else "<dir>"
-            raise ConfigError(f"{arg}: the value is empty (an unset shell variable?) and {EMPTY_MEANS[name]}; "
-                              f"give {name}={what}, or leave {name}= out")
+        name = key.lstrip("+")
+        if sep and key.startswith("++") and (not name.startswith(("hydra.", "hydra/")) or name in PATH_KEYS):
+            arg = f"{name}={value}"
+        out.append(arg)
+    return out
+
+
+def check_path(name: str, value, spelled: str, give: Optional[str] = None) -> None:
+    """A path a command takes (PATH_KEYS; the API's run_dir= and resume=; evaluate's and export's run= and out=): one
+    ConfigError line when it is empty (an unset shell variable, `resume=$RUN`) or goes through a loop of symlinks
+    (`ln -s loop loop`: Python's resolve() raises RuntimeError there, which read as an internal error)."""
+    text = str(value)
+    if not text.strip():
+        what = "<run dir>" if name == "resume" else "<run dir or checkpoint>" if name == "init_from" else "<dir>"
+        raise ConfigError(f"{spelled}: the value is empty (an unset shell variable?) and "
+                          f"{EMPTY_MEANS.get(name, 'there is nothing to read')}; "
+                          f"{give or f'give {name}={what}, or leave {name}= out'}")
+    try:
+        os.stat(os.path.expanduser(text))
+        looped = False
+    except OSError as exc:
+        looped = exc.errno == errno.ELOOP
+    if looped:
+        raise ConfigError(f"{spelled}: the path goes through a loop of symbolic links (a link that leads back to "
+                          "itself); give a path without it")
+
+
+def check_values(overrides: list[str]) -> None:
+    """What Hydra would take without a word: a path key with nothing after '=' (an unset shell variable,
+    `resume=$RUN`) or through a loop of symlinks, and `~key`, which deletes a key the app reads (Hydra's `~` is
+    for defaults lists)."""
+    for arg in overrides:
+        key, sep, value = arg.partition("=")
+        if sep and key.lstrip("+") in PATH_KEYS:
+            check_path(key.lstrip("+"), unquote(value), arg)
         if key.startswith("~") and not key.lstrip("~").startswith(("hydra.", "hydra/")):
             name = key.lstrip("~")
             raise ConfigError(f"{arg}: '~' deletes {name}, which the app reads; set it instead ({name}=<value>), or "
                               "leave it out for its default (python -m ppo_torchrl --cfg job shows them)")
+
+
+def checked_overrides(overrides: list[str], compose) -> list[str]:
+    """The checks of the training command's key=value overrides before anything is composed, one set for the CLI
+    (__main__.prepare) and the Python API (api.train): `++` read as plain for the app's keys, empty paths, symlink
+    loops and `~key` refused, paths handed to Hydra as typed (route_paths), `env=` a file in conf/env (the closest
+    named), counts written 1e6 taken as the integers they are. `compose` gives the config of some overrides."""
+    overrides = plain_keys(overrides)
+    check_values(overrides)
+    overrides = route_paths(overrides)
+    check_env_override(overrides)
+    return whole_counts(overrides, overrides, compose)[1]
 
 
 def algo_line() -> str:
@@ -211,11 +265,14 @@ def unquote(value: str) -> str:
 
 
 def route_paths(argv: list[str]) -> list[str]:
-    """Path-valued overrides go to Hydra through environment variables (PATH_KEYS)."""
+    """Path-valued overrides go to Hydra through environment variables (PATH_KEYS; MODEL_KEYS when Hydra's lexer
+    would refuse the path as typed)."""
     out = []
     for arg in argv:
         key, sep, value = arg.partition("=")
         if sep and key in PATH_KEYS and "${" not in value:  # an interpolation (${now:...}) stays Hydra's
+            arg = path_override(key, unquote(value))
+        elif sep and key in MODEL_KEYS and "${" not in value and "," not in value and not PLAIN.fullmatch(value):
             arg = path_override(key, unquote(value))
         out.append(arg)
     return out

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import io
 import lzma
-import sys
 from pathlib import Path
 from typing import IO, Union
 
@@ -50,20 +49,32 @@ def read_record_text(path: Union[str, Path]) -> str:
 def compress(path: Union[str, Path]) -> Path:
     """Write `<path>.xz` (xz -9, no timestamps: the same bytes from the same text) beside `path`, which stays.
     An `.xz` there already is kept when it holds this text, updated when it holds a prefix of it (the same log,
-    recorded earlier in the run), refused otherwise."""
+    recorded earlier in the run), refused otherwise (another text, or not xz at all). Inside a run dir the record is
+    the app's file like evaluate's outputs: listed in the run's manifest with its bytes' sha256 (write-ahead, then
+    renamed into place), so overwrite=true takes the run whole, and an update replaces only a record the app wrote."""
+    from ppo_torchrl.ownership import holder
+    from ppo_torchrl.rundir import atomic_write_bytes, check_replaceable, record
+
     path = Path(path)
     out = path.with_name(path.name + SUFFIX)
     text = path.read_bytes()
+    run = holder(out)
     if out.exists():
-        old = lzma.decompress(out.read_bytes()) if out.is_file() else None
+        try:
+            old = lzma.decompress(out.read_bytes()) if out.is_file() else None
+        except (lzma.LZMAError, EOFError):
+            old = None
         if old == text:
             return out  # already this record
-        if not old or not text.startswith(old):  # not a file, empty, or another text
+        if not old or not text.startswith(old):  # not a file, empty, not xz, or another text
             raise FileExistsError(f"{out} exists and holds another text; move it away first")
+        if run is not None:
+            check_replaceable(run, [out])  # a prefix the user put in a run dir is theirs: one line, left as it is
     data = lzma.compress(text, preset=9 | lzma.PRESET_EXTREME)
-    tmp = out.with_name(out.name + ".tmp")
-    tmp.write_bytes(data)
-    tmp.replace(out)
+    # a temp file of a name of its own beside it (mkstemp), renamed over `out`; a failed write removes it
+    atomic_write_bytes(out, lambda f: f.write(data), owner=run)
+    if run is not None:
+        record(run, [out])
     return out
 
 
@@ -81,28 +92,40 @@ def record_checkpoint(path: Union[str, Path]) -> Path:
     return Path(path)
 
 
+USAGE = ("python -m ppo_torchrl.records FILE [...]  (writes FILE.xz beside each; FILE stays; a .pt checkpoint loses "
+         "its optimizer state in place)")
+
+
 def main(argv: list) -> int:
     """python -m ppo_torchrl.records FILE [...]: each FILE's `.xz` record beside it (the plain file stays); a
-    checkpoint (`.pt`) is made a record checkpoint in place."""
+    checkpoint (`.pt`) is made a record checkpoint in place. A FILE inside a run dir is written under the run's lock,
+    taken exclusive (locks.hold): a run training there, or an evaluate reading it, refuses the command before it
+    writes anything. Bad input is ConfigError (one line, exit 2 through cli.run); an OSError (a full disk, a file-size
+    limit) is the app's one line, and no temp file stays."""
+    from ppo_torchrl.errors import ConfigError
+    from ppo_torchrl.locks import hold, release_reads
+    from ppo_torchrl.ownership import holder
+
     if not argv or any(a.startswith("-") for a in argv):
-        print("usage: python -m ppo_torchrl.records FILE [...]  (writes FILE.xz beside each; FILE stays; a .pt "
-              "checkpoint loses its optimizer state in place)", file=sys.stderr)
-        return 2
+        raise ConfigError(f"{'no FILE given' if not argv else repr(next(a for a in argv if a.startswith('-')))}; "
+                          f"usage: {USAGE}")
     missing = [a for a in argv if not Path(a).is_file()]
     if missing:
-        print(f"error: {missing[0]} is not a file", file=sys.stderr)
-        return 2
-    for a in argv:
-        try:
-            print(f"wrote {record_checkpoint(a) if a.endswith('.pt') else compress(a)}")
-        except FileExistsError as e:
-            print(f"error: {e}", file=sys.stderr)
-            return 2
-        except Exception as e:  # noqa: BLE001 - a damaged checkpoint: checkpoint.load's one line
-            print(f"error: {e}", file=sys.stderr)
-            return 2
+        raise ConfigError(f"{missing[0]} is not a file")
+    try:
+        for run in dict.fromkeys(holder(a) for a in argv):  # every run's lock before anything is written
+            hold(run, "records writes into a run dir")
+        for a in argv:
+            try:
+                print(f"wrote {record_checkpoint(a) if a.endswith('.pt') else compress(a)}", flush=True)
+            except FileExistsError as e:
+                raise ConfigError(str(e)) from None
+    finally:
+        release_reads()
     return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]))
+    from ppo_torchrl.cli import run
+
+    run(main)

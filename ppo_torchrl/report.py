@@ -43,8 +43,9 @@ RUN_COLUMNS = ("frames", "train/episode_return", "train/return_last100", "eval/r
 
 
 def read_metrics(path: Path, required=("frames",)) -> Dict[str, List[float]]:
-    """Columns of metrics.csv as float lists; empty cells become NaN. A file that is not the app's table (not
-    text, no header, a `required` column missing) is one ConfigError line."""
+    """Columns of metrics.csv as float lists; empty cells become NaN; a column of text alone (a logger's tag, a path)
+    is left out, not called damage. A file that is not the app's table (not text, no header, a `required` column
+    missing, a column of numbers with text in it, a row cut short) is one ConfigError line."""
     damaged = (f"{path} is damaged (a row that is not numbers); restore it, or delete the damaged rows, and run "
                "the report again")
     try:
@@ -55,15 +56,31 @@ def read_metrics(path: Path, required=("frames",)) -> Dict[str, List[float]]:
                           "run") from None
     if not rows:
         raise ConfigError(f"{path} has no rows yet: the run has not finished an iteration")
-    try:
-        columns = {key: [float(r[key]) if r[key] not in ("", None) else float("nan") for r in rows] for key in rows[0]}
-    except (TypeError, ValueError, KeyError):
-        raise ConfigError(damaged) from None
+    if any(None in r or None in r.values() for r in rows):  # a row longer or shorter than the header: cut or mixed
+        raise ConfigError(damaged)
+    columns = {}
+    for key in rows[0]:
+        cells = [r[key] for r in rows]
+        numbers = [number(c) for c in cells]
+        filled = [n for c, n in zip(cells, numbers) if c != ""]
+        if filled and all(n is None for n in filled) and key not in required:  # a text column (a tag): not plotted
+            continue
+        if any(n is None and c != "" for c, n in zip(cells, numbers)):  # numbers and text in one column: damage
+            raise ConfigError(damaged)
+        columns[key] = [float("nan") if n is None else n for n in numbers]
     missing = [key for key in required if key not in columns]
     if missing:
         raise ConfigError(f"{path} has no column {missing[0]}: it is not a metrics.csv this app wrote; restore it "
                           "from the run, or report another run")
     return columns
+
+
+def number(cell: str):
+    """A cell as a float, or None when it is empty or not a number."""
+    try:
+        return float(cell) if cell != "" else None
+    except ValueError:
+        return None
 
 
 def last100_label(m: Dict[str, List[float]]) -> str:

@@ -354,9 +354,13 @@ def shipped(directory: Path) -> bool:
 
 
 def output_dir_for(directory: Path, default: Path) -> Path:
-    """Where a command writes the files it makes for the run in `directory`: `default` (inside the run dir),
-    or outputs/zoo/<name>/ for a shipped zoo folder, which stays as it was shipped."""
-    return Path("outputs") / "zoo" / Path(directory).resolve().name if shipped(directory) else default
+    """Where a command writes the files it makes for the run in `directory`: `default` (inside the run dir), or for a
+    shipped run, one under zoo/ or results/ (the repository's records, which stay as they were shipped), the same
+    path under outputs/: outputs/zoo/<name>/, outputs/results/robots/<round>/<run>/ (shipped.shipped_run)."""
+    from ppo_torchrl.shipped import shipped_run
+
+    inside = shipped_run(directory)
+    return Path("outputs") / inside if inside is not None else default
 
 
 def in_use(directory: Path) -> bool:

@@ -58,6 +58,8 @@ def describe_start(cfg, cli_overrides: list[str]) -> str:
         line += f" (collector.total_frames={cfg.collector.total_frames} rounded up)"
     collector, why = describe_backend(cfg)
     line += f"; collector: {collector} ({why})"
+    if str(cfg.device) == "auto":  # what auto picked, said once
+        line += f"; {auto_device()}"
     defaults = flatten(OmegaConf.to_container(OmegaConf.structured(Config)))
     users = user_values(cli_overrides)
     unread = tuple(not_applicable(cfg))
@@ -66,6 +68,17 @@ def describe_start(cfg, cli_overrides: list[str]) -> str:
                and not (key in users and users[key] in (value, None)) and key not in unread]
     line += "; the env file/preset changes no defaults" if not changed else f"; set by the env file/preset: {', '.join(changed)}"
     return job_tag() + line + robot_line(cfg.env)
+
+
+def auto_device() -> str:
+    """`device=auto: cpu (no CUDA device)` or `device=auto: cuda (<its name>)`: what device=auto picked."""
+    import torch
+
+    from ppo_torchrl.validation import resolve_device
+
+    device = resolve_device("auto")
+    why = torch.cuda.get_device_name(device) if device.type == "cuda" else "no CUDA device"
+    return f"device=auto: {device.type} ({why})"
 
 
 def robot_line(env_cfg) -> str:

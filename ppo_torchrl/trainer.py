@@ -197,7 +197,8 @@ class Trainer:
         finishing = self.resumed and self.iteration >= self.num_iterations  # every batch trained, not finished
         print(startup.describe_resume(self.run_dir, self.frames, cfg) + (
               "; every batch is trained: the final eval runs and the run is marked finished" if finishing else "")
-              if self.resumed else startup.describe_start(cfg, startup.command_line()), file=sys.stderr, flush=True)
+              if self.resumed else startup.describe_start(cfg, startup.command_line() or self.life.overrides),
+              file=sys.stderr, flush=True)  # (the API's overrides: life.overrides, the CLI's: Hydra's)
         batch_frames = cfg.collector.frames_per_batch
         stop = StopRequest()
         self.progress = Progress(self.num_iterations * batch_frames, self.frames, cfg.logger.print_every_s)

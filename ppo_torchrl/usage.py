@@ -26,7 +26,8 @@ def _evaluate():
         "heights": "step heights in m, e.g. 0,0.05,0.1,0.15,0.2, or in leg lengths for env=legged, 0,0.2l,0.25l,0.3l: "
                    "evaluate at each; writes height_sweep.csv and the success-rate curve height_sweep.png (to film "
                    "one height: env.terrain.step_height=<m> video=true)",
-        "out": "where the eval writes its files: eval.json, the video, a height sweep's (empty: <run dir>/eval)",
+        "out": "where the eval writes its files: eval.json, the video, a height sweep's (empty: <run dir>/eval; a "
+               "shipped run under zoo/ or results/: outputs/<its path>/)",
         "tracking": "a joystick run (env.legged.command.kind=velocity): `episodes` episodes per command of a fixed set, "
                     "each held; writes tracking.json, tracking.md and tracking.png (tasks/locomotion/tracking.py)",
         "drive": "a joystick run: film a scripted command sequence, name:vx,vy,yaw:seconds;... in the robot's units, "
@@ -45,13 +46,14 @@ def _evaluate():
 
 
 def _export():
-    usage = "python -m ppo_torchrl.export run=<run dir> [checkpoint=best|last|<file>]"
+    usage = "python -m ppo_torchrl.export run=<run dir> [checkpoint=best|last|<file>] [out=<dir>|<file>.pt]"
     help = {"run": "the run dir whose policy is exported (or latest, latest/<env>); writes <run dir>/policy.pt (for a "
-                   "shipped zoo/ folder: outputs/zoo/<name>/policy.pt)",
-            "checkpoint": "best, last, or a checkpoint file"}
+                   "shipped run under zoo/ or results/: outputs/<its path>/policy.pt)",
+            "checkpoint": "best, last, or a checkpoint file",
+            "out": "where policy.pt goes instead: a dir (its policy.pt) or a file ending in .pt"}
     about = ("Writes the policy as TorchScript: a raw observation in, the deterministic action within the bounds\n"
              "out, normalization baked in; it runs with torch alone: torch.jit.load('policy.pt')(obs).")
-    spec = {"run": None, "checkpoint": "best"}
+    spec = {"run": None, "checkpoint": "best", "out": ""}
     return usage, spec, help, about
 
 

@@ -121,11 +121,9 @@ def validate_config(cfg, keep_env: bool = False, build_env: bool = True):
     for ok, message in checks:
         if not ok:
             raise ConfigError(message)
-    from ppo_torchrl.envs import env_checks
+    from ppo_torchrl.env_values import check_env
 
-    for ok, message in env_checks(env):  # after the plain values: env=legged reads its model here
-        if not ok:
-            raise ConfigError(message)
+    check_env(env)  # after the plain values: env=legged reads its model here
     if env.get("xml_file"):
         from ppo_torchrl.robots.env import heading_angle
 
@@ -171,23 +169,11 @@ def check_open_files(workers: int) -> None:
 def check_finite(cfg) -> None:
     """NaN nowhere; infinity only in a range or in the env's own make_kwargs (`optim.lr=inf` stopped at the
     first update before)."""
-    import math
-
-    def walk(node, path):
-        if isinstance(node, dict):
-            for key, value in node.items():
-                walk(value, f"{path}{key}.")
-        elif isinstance(node, list):
-            for value in node:
-                walk(value, path)
-        elif isinstance(node, float) and not math.isfinite(node):
-            key = path.rstrip(".")
-            if math.isnan(node) or not ("range" in key or key.startswith("env.make_kwargs")):
-                raise ConfigError(f"{key}={node} must be a finite number")
+    from ppo_torchrl.env_values import finite
 
     data = OmegaConf.to_container(cfg, resolve=True)
     data.pop("hydra", None)
-    walk(data, "")
+    finite(data, "")
 
 
 def resolve_device(name: str):

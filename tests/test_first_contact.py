@@ -72,3 +72,97 @@ def test_the_eta_leaves_the_warm_up_out(capsys, monkeypatch):
     lines = capsys.readouterr().err.splitlines()  # with the start and done lines
     assert lines[0].endswith("eta after warm-up"), lines
     assert lines[2].endswith("eta   1.6 min"), lines  # 97,000 frames at 1000/s, not at the mean's 50/s
+
+
+# ---------------------------------------------------------------- issue 76 item 4: first contact, round 4
+
+def readme() -> str:
+    from conftest import ROOT
+
+    return (ROOT / "README.md").read_text()
+
+
+def test_the_readme_shows_the_newest_reported_robot_round():
+    """The README's robot section was issue 46's table (its 80% goal, Go1 at 0%); the newest reported round is recipe
+    v2's twelve rows (results/robots/legged_v2_2026-11-28/table.md) and the v3 decision: every 0.25 l figure of the
+    README's table is the table.md's, per robot and seed, with the round's goals, seeds and commands."""
+    import re
+
+    from conftest import ROOT
+
+    text = readme()
+    assert "results/robots/legged_v2_2026-11-28" in text and "results/robots/tuning_v3_2026-11-29/README.md" in text
+    assert "goal 80%" not in text and "seeds 12 and 13" in text and "60000-60099" in text
+    assert "make robot RECIPE=legged_trot_v2" in text and len(text.splitlines()) <= 300
+    table = (ROOT / "results" / "robots" / "legged_v2_2026-11-28" / "table.md").read_text()
+    reported = {m.group(1): m.group(2) for m in re.finditer(r"^\| (\w+_seed1[23]) \|.*? 0\.25 l (\d+)%", table, re.M)}
+    names = {"A1": "a1", "Go2": "go2", "Spot": "spot", "Barkour vB": "barkour_vb", "Go1": "go1", "ANYmal B": "anymal_b"}
+    shown = {}
+    for robot, s12, s13 in re.findall(r"^\| ([\w ]+?) \(.*?\| 12 / 13 \| (\d+)% / (\d+)% \|", text, re.M):
+        shown[f"{names[robot]}_seed12"], shown[f"{names[robot]}_seed13"] = s12, s13
+    assert len(reported) == 12 and shown == reported, (shown, reported)
+
+
+def test_the_readme_says_how_to_clone_shallow_shrink_make_robot_and_pick_envpool():
+    text = readme()
+    assert "git clone --depth 1" in text
+    assert all(knob in text for knob in ("EPISODES=", "HEIGHTS=", "ARGS="))
+    assert "backend` (auto, fast, torchrl, envpool)" in text
+
+
+def test_every_hint_that_lists_robots_names_the_six_shipped_ones(tmp_path):
+    """A wrong model path's hint listed the in-house models (quadruped.xml, ...) and not the six Menagerie robots; the
+    --help page's env group named only the in-house ones."""
+    from conftest import ROOT
+    from ppo_torchrl.envs import resolve_model_file
+    from ppo_torchrl.shipped import robots
+
+    assert len(robots()) == 6
+    with pytest.raises(ConfigError) as error:
+        resolve_model_file(str(tmp_path / "no_such_scene.xml"))
+    assert all(robot in str(error.value) for robot in robots()), str(error.value)
+    page = (ROOT / "conf" / "hydra" / "help" / "ppo_torchrl.yaml").read_text()
+    assert all(robot.split("/")[1] in page for robot in robots()) and "envpool" in page
+
+
+def test_the_start_line_says_what_device_auto_picked_and_credits_the_apis_overrides_to_the_user(tmp_path, capsys):
+    """device=auto did not say what it picked; a run started by the API credited the user's overrides to the env file
+    ('set by the env file/preset: collector.frames_per_batch=256, ...')."""
+    import ppo_torchrl
+    from conftest import TINY
+
+    ppo_torchrl.train(["env=InvertedPendulum-v4", *TINY, "device=auto"], run_dir=tmp_path / "run")
+    start = next(line for line in capsys.readouterr().err.splitlines() if line.startswith("start: "))
+    assert "; device=auto: cpu (no CUDA device)" in start or "; device=auto: cuda (" in start, start
+    assert "frames_per_batch" not in start and "loss.epochs" not in start, start
+
+
+def test_evaluates_misspelt_env_key_gets_the_closest_one(tmp_path):
+    """evaluate's env.<key>=<value> misspelt: omegaconf's line, no did-you-mean (the training command had one)."""
+    from conftest import TINY, compose_config
+    from ppo_torchrl.evaluate import apply_overrides
+
+    with pytest.raises(ConfigError, match=r"did you mean env\.max_episode_steps\?"):
+        apply_overrides(compose_config(["env=InvertedPendulum-v4", *TINY]), ["env.max_episod_steps=5"])
+
+
+def test_a_shipped_run_is_only_read_and_heights_in_metres_say_so(tmp_path, monkeypatch, capsys):
+    """evaluate and export of a shipped run under results/ wrote into the tracked tree (eval/, policy.pt) and rewrote
+    its manifest; export had no out=. Now their files go under outputs/<the run's path>/ (or out=), the run as it was
+    shipped. And heights=0,0.1 on a legged run (every value below 1) says once that they are metres, not leg lengths."""
+    from conftest import ROOT
+    from test_bad_input import tree_digest
+
+    from ppo_torchrl import evaluate, export
+
+    run = ROOT / "results" / "robots" / "legged_v2_2026-11-28" / "go1_seed12"
+    before = tree_digest(run)
+    monkeypatch.chdir(tmp_path)
+    evaluate.main([f"run={run}", "checkpoint=last", "episodes=1", "heights=0,0.1"])
+    notes = [line for line in capsys.readouterr().err.splitlines() if line.startswith("note: ")]
+    assert sum("are in m" in line and "heights=0,0.1l" in line for line in notes) == 1, notes
+    mirrored = tmp_path / "outputs" / "results" / "robots" / "legged_v2_2026-11-28" / "go1_seed12"
+    assert (mirrored / "height_sweep.csv").is_file()
+    assert export.main([f"run={run}", "checkpoint=last"]).resolve() == (mirrored / "policy.pt").resolve()
+    assert export.main([f"run={run}", "checkpoint=last", f"out={tmp_path / 'mine.pt'}"]) == tmp_path / "mine.pt"
+    assert tree_digest(run) == before
