@@ -21,6 +21,11 @@ Five more cases (issue 60, item 4), drawn as commands are:
   then the same command, resume=<sweep>/0 and the command with overwrite=true, each let finish.
 In these, a refusal that calls a file not the app's must name a file of the user's.
 
+Round 6 (issue 76, item 3): `records` (run-dir steps: on the run's config.yaml), and with --real the Python API
+(api_train, api_overwrite, api_resume, api_load, api_evaluate: a script's train / load().predict / evaluate_run) and
+`crafted` (a real run's copy whose checkpoints carry a payload aimed at a user's file, read by a random entry point):
+data_safety_round6.py says how.
+
 Two modes, one property:
 - run-dir steps (default): each command is a fresh process that makes the entry points' `ppo_torchrl.rundir`
   calls in their order (claims, Hydra's start-up files, commits, atomic checkpoints and summaries, listings,
@@ -59,12 +64,15 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 from ppo_torchrl import rundir  # noqa: E402  (the manifest's reading: which eval.json is the app's)
+sys.path.insert(0, str(ROOT / "benchmarks"))
+from data_safety_round6 import API_KINDS, API_NESTED, api_argv, crafted_case  # noqa: E402
 
 RUNS = ("r0", "r1", "r2")
 KINDS = ("new", "overwrite", "overwrite", "resume", "evaluate", "export", "report", "sweep", "sweep_overwrite", "trial",
-         "trial_overwrite")
+         "trial_overwrite", "records")
 CASES = ("evaluate_out", "evaluate_out", "race", "race", "claim_cut", "claim_cut", "full_disk")  # issue 60, item 4
-REAL_CASES = ("optuna",)
+REAL_CASES = ("optuna", "crafted", "crafted")  # crafted: issue 76, item 3
+REAL_KINDS = API_KINDS  # the Python API's entry points (issue 76, item 3)
 OVERWRITES = ("overwrite", "sweep_overwrite", "trial_overwrite")
 ENV = {**os.environ, "PYTHONWARNINGS": "ignore"}
 
@@ -138,6 +146,9 @@ try:
                 rundir.intend(d, [d / "trial.json"])
             rundir.atomic_write_json(d / "trial.json", {"seeds": [1, 2][:seed]})
             rundir.record(d)
+    elif kind == "records":  # records.main itself: the run's lock, its record listed (the config.yaml train() wrote)
+        from ppo_torchrl import records
+        records.main([str(d / "config.yaml")])
     elif kind in ("evaluate", "export", "report"):
         if not d.is_dir():
             raise ConfigError(f"run={d}: no such run dir")
@@ -257,11 +268,15 @@ REAL = {
     "trial": lambda d: ["-m", "ppo_torchrl", *TINY, "trial_seeds=[1,2]", f"hydra.run.dir={d}"],
     "trial_overwrite": lambda d: ["-m", "ppo_torchrl", *TINY, "trial_seeds=[1,2]", f"hydra.run.dir={d}",
                                   "overwrite=true"],
+    "records": lambda d: ["-m", "ppo_torchrl.records", str(d / "metrics.csv"), str(d / "checkpoints" / "last.pt")],
+    **{kind: (lambda d, kind=kind: api_argv(kind, d, TINY)) for kind in API_KINDS},
+    "init_from": lambda d: ["-m", "ppo_torchrl", *TINY, f"init_from={d / 'checkpoints' / 'last.pt'}",
+                            f"hydra.run.dir={d.parent / ('init_' + d.name)}"],
     "optuna": lambda d: ["-m", "ppo_torchrl", "-m", "hparams_search=optuna_seeds", *TINY, "collector.total_frames=1024",
                          "collector.frames_per_batch=1024", "trial_seeds=[6,7]", "hydra.sweeper.n_trials=2",
                          f"hydra.sweeper.storage=sqlite:///{d.parent / 'optuna.db'}", f"hydra.sweep.dir={d}"],
 }
-NESTED = ("resume", "evaluate", "export", "report")  # these also go to a sweep's job or a trial's seed run
+NESTED = ("resume", "evaluate", "export", "report", "records")  # these also go to a sweep's job or a trial's seed run
 
 
 def command(kind: str, run: Path, real: bool, pause: str = "0", extra=(), hooked: bool = False) -> list:
@@ -362,7 +377,7 @@ def targets(root: Path, name: str, kind: str, rng: random.Random) -> Path:
     inside it (a sweep's job, a trial's seed)."""
     top = root / name
     inner = sorted(p.parent for p in top.glob("*/.ppo_torchrl.json")) if top.is_dir() else []
-    return rng.choice([top, *inner]) if kind in NESTED and inner else top
+    return rng.choice([top, *inner]) if kind in NESTED + API_NESTED and inner else top
 
 
 def siblings(top: Path) -> set:
@@ -477,7 +492,7 @@ def claim_cut(tree, rng, real) -> tuple:
 
 def full_disk(tree, rng, real) -> tuple:
     """A command under a small file-size limit; then overwrite=true of its top dir, let finish."""
-    kind = rng.choice(OVERWRITES + NESTED)
+    kind = rng.choice(OVERWRITES + NESTED + (API_NESTED if real else ()))
     run = targets(tree.root, rng.choice(RUNS), kind, rng)
     fsize = rng.choice([200, 2_000, 20_000, 100_000] if real else [0, 100, 300, 1_000])  # real: 0 fails torch's import
     code, err = app(kind, run, rng, real, fsize=fsize, cuts=False)
@@ -499,6 +514,11 @@ def optuna(tree, rng, real) -> tuple:
     return what, [f for name, code, err in ends for f in checked(name, code, err, tree)]
 
 
+def crafted(tree, rng, real) -> tuple:
+    """data_safety_round6.crafted, with this module's helpers (a crafted checkpoint read by a random entry point)."""
+    return crafted_case(tree, rng, real, sys.modules[__name__])
+
+
 _START: dict = {}
 
 
@@ -516,21 +536,23 @@ def start_tree(real: bool) -> Path:
     return _START[real]
 
 
-def sequence(seed: int, steps: int = 10, real: bool = False, log=None, kinds=None) -> list:
+def sequence(seed: int, steps: int = 10, real: bool = False, log=None, kinds=None, order=None) -> list:
     """One random sequence; returns its failures (empty: every user byte kept, every dir usable or explained).
-    log: a list that gets one line per step (what ran, how it ended, its error line). kinds: draw only these."""
+    log: a list that gets one line per step (what ran, how it ended, its error line). kinds: draw only these.
+    order: these kinds, one a step in this order (a user's edit before each), in place of the draws."""
     rng = random.Random(seed)
+    steps = 2 * len(order) if order else steps
     failures = []
-    drawn = [k for k in KINDS + CASES + (REAL_CASES if real else ()) if kinds is None or k in kinds]
+    drawn = [k for k in KINDS + CASES + (REAL_CASES + REAL_KINDS if real else ()) if kinds is None or k in kinds]
     with tempfile.TemporaryDirectory() as tmp:
         for name in RUNS:  # r0 a finished run, r1 a sweep of two jobs, r2 a trial of two seeds (copied)
             shutil.copytree(start_tree(real) / name, Path(tmp) / name, symlinks=True)
         tree = Tree(Path(tmp), rng)
         for i in range(steps):
-            if rng.random() < 0.35 or not drawn:
+            if (order and i % 2 == 0) or (not order and (rng.random() < 0.35 or not drawn)):
                 what = "user: " + tree.user_step()
             else:
-                kind = rng.choice(drawn)
+                kind = order[i // 2] if order else rng.choice(drawn)
                 if kind in CASES + REAL_CASES:
                     what, failed = globals()[kind](tree, rng, real)
                     failures += [f"seed {seed} step {i} {failure}" for failure in failed]
@@ -538,8 +560,7 @@ def sequence(seed: int, steps: int = 10, real: bool = False, log=None, kinds=Non
                     run = targets(tree.root, rng.choice(RUNS), kind, rng)
                     code, err = app(kind, run, rng, real)
                     what = f"{kind} {run.relative_to(tree.root)} -> {code} {said(err)}"
-                    if not explained(code, err):
-                        failures.append(f"seed {seed} step {i} {what}: {err.strip()[-600:]}")
+                    failures += [f"seed {seed} step {i} {failure}" for failure in checked(what, code, err, tree)]
             if log is not None:
                 log.append(f"seed {seed} step {i}: {what}")
             lost = tree.lost()
@@ -548,9 +569,9 @@ def sequence(seed: int, steps: int = 10, real: bool = False, log=None, kinds=Non
                 break
         for run in RUNS:  # every dir left: a new command there works or is explained
             if (tree.root / run).exists():
-                code, err = _plain(tree.root / run, real)
-                if not explained(code, err):
-                    failures.append(f"seed {seed} end: {run} not usable: {err.strip()[-600:]}")
+                code, err = _plain(tree.root / run, real)  # usable, or a refusal naming a user's file (never the app's)
+                failures += [f"seed {seed} end: {run} not usable: {failure}"
+                             for failure in checked(f"overwrite {run}", code, err, tree)]
                 if log is not None:
                     log.append(f"seed {seed} end: overwrite {run} -> {code} {said(err)}")
         lost = tree.lost()
@@ -576,9 +597,10 @@ def main(argv=None) -> int:
     parser.add_argument("--log", help="write every step (command, exit code, error line) to this file")
     args = parser.parse_args(argv)
     kinds = set(args.kinds.split(",")) if args.kinds else None
-    unknown = (kinds or set()) - set(KINDS + CASES + REAL_CASES)
+    known = set(KINDS + CASES + REAL_CASES + REAL_KINDS)
+    unknown = (kinds or set()) - known
     if unknown:
-        parser.error(f"unknown kinds {sorted(unknown)}; known: {', '.join(sorted(set(KINDS + CASES + REAL_CASES)))}")
+        parser.error(f"unknown kinds {sorted(unknown)}; known: {', '.join(sorted(known))}")
     start, failures, log = time.time(), [], []
     for k in range(args.sequences):
         failures += sequence(args.seed * 100_000 + k, args.steps, args.real, log, kinds)

@@ -58,10 +58,17 @@ def test_the_apps_real_commands_cut_at_random_keep_every_user_byte():
     """The property on the app's own commands (issue 60 item 4): `python -m ppo_torchrl` runs, sweeps and trials,
     resume=, overwrite=true, evaluate, export and report on InvertedPendulum-v4, each cut by SIGINT or kill -9 at a
     random instant or let finish, among a user's edits; one short sequence here, many in the long mode
-    (`python benchmarks/data_safety.py --real`)."""
+    (`python benchmarks/data_safety.py --real`). Then (issue 76 item 3) records, the Python API and a crafted
+    checkpoint in one fixed order."""
     log = []
     assert data_safety.sequence(3, steps=5, real=True, log=log) == [], log
     assert any(" -> " in line for line in log), log  # real commands ran, not only a user's edits
+    # issue 76 item 3: the records command, the Python API's train / evaluate_run / load and a crafted checkpoint, each
+    # once (a user's edit before each), cut at random or let finish (the same start tree: this process's)
+    new = ["records", "api_overwrite", "api_evaluate", "crafted", "api_load"]
+    log = []
+    assert data_safety.sequence(4, real=True, log=log, order=new) == [], log
+    assert [kind for kind in new if any(f": {kind} " in line or f": {kind}" in line for line in log)] == new, log
 
 
 def test_a_full_disk_or_a_kill_between_a_runs_write_and_its_listing_leaves_a_dir_overwrite_takes(tmp_path,
@@ -144,3 +151,31 @@ def test_a_signal_after_a_command_is_done_is_ignored_not_a_traceback(monkeypatch
     finally:
         for s, handler in before.items():
             signal.signal(s, handler)
+
+
+def test_records_lists_what_it_writes_so_overwrite_takes_the_run(tmp_path, capsys):
+    """Found by the property's records kind (issue 76 item 3): records wrote metrics.csv.xz into a run dir without
+    listing it, so overwrite=true then refused the run ("it holds metrics.csv.xz, which this app did not write").
+    The record is listed with its bytes' sha256, as evaluate's outputs are: overwrite=true takes the run; a prefix
+    record the user put there is not replaced."""
+    from ppo_torchrl import records, rundir
+    from ppo_torchrl.errors import ConfigError
+    from ppo_torchrl.lifecycle import Lifecycle
+
+    run, life = tmp_path / "run", Lifecycle()
+    life.claim(run)
+    life.commit(run)
+    (run / "metrics.csv").write_text("iteration,frames\n1,2048\n")
+    rundir.record(run)
+    life.finish()
+    assert records.main([str(run / "metrics.csv")]) == 0
+    assert "metrics.csv.xz" in rundir.listed(run) and rundir.foreign_files(run) == []
+    rundir.check_new_dir(run, overwrite=True)  # the app's dir still: overwrite=true may take it
+    users = tmp_path / "other"
+    shutil.copytree(run, users)
+    (users / "metrics.csv.xz").unlink()
+    (users / "metrics.csv.xz").write_bytes(__import__("lzma").compress(b"iteration,frames\n"))  # the user's prefix
+    with open(users / "metrics.csv", "a") as f:
+        f.write("2,4096\n")
+    with pytest.raises(ConfigError, match="is not a file this app wrote"):
+        records.main([str(users / "metrics.csv")])
