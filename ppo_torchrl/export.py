@@ -85,9 +85,10 @@ def main(argv: list[str]) -> Path:
     out = Path(args["out"]) if args["out"] else None  # out=<dir> (policy.pt in it) or out=<file>.pt
     target = (out if out.suffix == ".pt" else out / "policy.pt") if out is not None else \
         output_dir_for(run_dir, run_dir) / "policy.pt"  # a shipped run (zoo/, results/): under outputs/, its path
-    check_replaceable(run_dir, [target])  # a policy.pt the app did not write is left alone
     read(holder(target))  # out= in another run dir: that one is read (and written) too
     cfg, ac, state = load_policy(run_dir, str(checkpoint))
+    deploy = [target.parent / name for name in DEPLOY_FILES] if cfg.env.get("legged") is not None else []
+    check_replaceable(run_dir, [target, *deploy])  # a policy.pt (or policy.json ...) the app did not write: left alone
     why = unwritable(target.parent)
     if why:
         raise ConfigError(f"cannot write {target}: {why}; copy the run dir somewhere writable")
