@@ -289,6 +289,10 @@ def main(argv: list[str]) -> dict:
         check_spec(state, env_spec(cfg.env), cfg.env.id)
     obs_stats = state["normalization"]["obs"]
     label = f"{env_label(cfg.env)} @ {state['frames']} frames ({which})"
+    joystick = batched(cfg.env) and ((cfg.env.get("legged") or {}).get("command") or {}).get("kind") == "velocity"
+    if (args["tracking"] or args["drive"]) and not joystick:  # before any env is built
+        raise ConfigError(f"{'tracking=true' if args['tracking'] else 'drive='} measures a joystick run "
+                          f"(experiment=legged_joystick: env.legged.command.kind=velocity); {run_dir} is not one")
     if args["tracking"]:
         return tracking_eval(cfg, ac, obs_stats, args, out_dir, run_dir, label)
     if args["drive"]:

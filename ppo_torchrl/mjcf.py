@@ -60,8 +60,8 @@ def floor_to_the_horizon(env) -> None:
     reads changes."""
     import mujoco
 
-    model = getattr(env, "model", env)  # an env, or a model itself
-    if model is None:
+    model = env if isinstance(env, mujoco.MjModel) else getattr(env, "model", None)  # a model, or an env with one
+    if not isinstance(model, mujoco.MjModel):  # not a MuJoCo env (env=gym Pendulum-v1): nothing to widen
         return
     for g in np.flatnonzero(model.geom_type == mujoco.mjtGeom.mjGEOM_PLANE):
         size = model.geom_size[g, :2].copy()

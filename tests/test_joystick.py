@@ -181,3 +181,18 @@ def test_a_drive_script_is_parsed_or_refused_in_one_line():
     for bad in ("forward:0.3,0:4", "forward:0.3,0,0:-1", "forward:0.3,0,0", "x:nan,0,0:1"):
         with pytest.raises(ConfigError, match="expected name:vx,vy,yaw:seconds"):
             parse(bad)
+
+
+def test_a_drive_segment_shorter_than_a_control_step_is_one_line(tmp_path):
+    """A segment of 0.001 s rounds to no control step: its measured velocity was the mean of nothing (NaN)."""
+    from ppo_torchrl.envs import env_spec, make_batch
+    from ppo_torchrl.errors import ConfigError
+    from ppo_torchrl.models import make_actor_critic
+    from ppo_torchrl.tasks.locomotion.drive import drive
+
+    cfg = joystick()
+    ac = make_actor_critic(cfg.policy, env_spec(cfg.env))
+    with pytest.raises(ConfigError, match="shorter than a control step"):
+        drive(make_batch, cfg, ac, None, [("go", [0.3, 0.0, 0.0], 1.0), ("blink", [0.0, 0.0, 0.0], 0.001)],
+              tmp_path / "drive.mp4", 0, owner=None)
+    assert not (tmp_path / "drive.mp4").exists()

@@ -381,3 +381,29 @@ def test_a_symlink_loop_is_a_user_fixable_error_wherever_it_is_met():
 
     error = OSError(errno.ELOOP, "Too many levels of symbolic links", "x/loop")
     assert exit_code(error) == 1 and message_of(error).startswith("error: Too many levels of symbolic links writing x")
+
+
+# ---------------------------------------------------------------- review mends (2026-12-02)
+
+def test_tracking_and_drive_on_a_run_that_is_no_joystick_are_one_line(run_copy, capsys):
+    """evaluate tracking=true / drive= on a Gymnasium run read env.legged's kwargs or built the batch of a model file
+    the run has none of: a KeyError traceback, exit 1. Now one line naming what they measure, nothing written."""
+    before = sorted(p.name for p in run_copy.iterdir())
+    for option in ("tracking=true", "drive=forward:0.3,0,0:1"):
+        code, lines = ran(evaluate.main, [f"run={run_copy}", "checkpoint=last", option], capsys)
+        one_line(code, lines, "measures a joystick run")
+    assert sorted(p.name for p in run_copy.iterdir()) == before
+
+
+def test_filming_a_non_mujoco_env_leaves_its_floor_alone():
+    """floor_to_the_horizon on an env without a MuJoCo model (Pendulum-v1, env=gym) took the env for a model:
+    AttributeError on geom_type, so video=true of such a run ended in a traceback."""
+    import gymnasium as gym
+
+    from ppo_torchrl.mjcf import floor_to_the_horizon
+
+    env = gym.make("Pendulum-v1", render_mode="rgb_array")
+    floor_to_the_horizon(env.unwrapped)  # nothing to widen, no error
+    hopper = gym.make("Hopper-v4").unwrapped
+    floor_to_the_horizon(hopper)
+    assert hopper.model.geom_size[0, 0] > 20  # a MuJoCo env's plane is still widened

@@ -65,6 +65,9 @@ def drive(make_batch, cfg, ac, obs_stats, segments: list, path: Path, seed: int,
             raise ConfigError("drive= steers a joystick run (env.legged.command.kind=velocity)")
         speed, rate = (world.robot.speed_scale, 1.0 / world.robot.time_scale) if world.robot else (1.0, 1.0)
         every = max(1, math.ceil((1.0 / world.dt) / VIDEO_MAX_FPS - 1e-9))
+        short = [name for name, _, s in segments if round(s / world.dt) < 1]
+        if short:  # a segment of no control step would measure nothing
+            raise ConfigError(f"drive=: segment {short[0]} is shorter than a control step ({world.dt:.3f} s)")
         total = sum(round(s / world.dt) for _, _, s in segments)
         if total > batch.max_steps:
             raise ConfigError(f"drive=: {total * world.dt:.1f} s of commands, longer than the run's episodes "
