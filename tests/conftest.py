@@ -48,3 +48,15 @@ def run_cli(*args, module="ppo_torchrl", timeout=300, cwd=None):
     env.pop("PPO_TORCHRL_DEBUG", None)
     return subprocess.run([sys.executable, "-m", module, *args], capture_output=True, text=True,
                           timeout=timeout, cwd=cwd or ROOT, env=env)
+
+
+def ran(main, args, capsys):
+    """An entry point's main in-process through the one error path: (exit code, stderr lines); 0 when it returned."""
+    from ppo_torchrl.errors import guarded
+
+    try:
+        guarded(main, args)
+        code = 0
+    except SystemExit as exit_:
+        code = exit_.code
+    return code, [line for line in capsys.readouterr().err.splitlines() if line.strip()]

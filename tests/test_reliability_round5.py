@@ -11,22 +11,11 @@ import time
 
 import pytest
 
-from conftest import run_cli
+from conftest import ran, run_cli
 from ppo_torchrl import evaluate, export, report, rundir
 from ppo_torchrl.lifecycle import Lifecycle
-from ppo_torchrl.errors import guarded
 from test_bad_input import finished_run, refused, tree_digest  # noqa: F401  (the module's finished run)
 from test_reliability_round3 import RUN, copy_of
-
-
-def ran(main, args, capsys):
-    """An entry point's main in-process: (exit code, stderr lines); 0 when it returned."""
-    try:
-        guarded(main, args)
-        code = 0
-    except SystemExit as exit_:
-        code = exit_.code
-    return code, [line for line in capsys.readouterr().err.splitlines() if line.strip()]
 
 
 def users_eval(run):

@@ -21,12 +21,13 @@ import pytest
 import ppo_torchrl
 from ppo_torchrl import checkpoint, evaluate, records, report
 from ppo_torchrl.__main__ import prepare
-from ppo_torchrl.errors import ConfigError, guarded
+from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.lifecycle import Lifecycle
 from ppo_torchrl.trainer import Trainer
 
-from conftest import ROOT, TINY, compose_config
+from conftest import ROOT, TINY, compose_config, ran
 from test_bad_input import refused, tree_digest
+from test_reliability_round3 import RUN
 
 sys.path.insert(0, str(ROOT / "benchmarks"))
 import cli_args  # noqa: E402
@@ -34,7 +35,6 @@ import gait_check  # noqa: E402
 import robots_table  # noqa: E402
 import whole_run  # noqa: E402
 
-RUN = ["env=InvertedPendulum-v4", *TINY]
 GO1 = ROOT / "results" / "robots" / "legged_v2_2026-11-28" / "go1_seed12"  # a shipped legged run (record checkpoint)
 
 
@@ -49,16 +49,6 @@ def finished_run(tmp_path_factory):
 @pytest.fixture
 def run_copy(finished_run, tmp_path):
     return Path(shutil.copytree(finished_run, tmp_path / "run"))
-
-
-def ran(main, args, capsys):
-    """An entry point's main in-process through the one error path: (exit code, stderr lines)."""
-    try:
-        guarded(main, args)
-        code = 0
-    except SystemExit as exit_:
-        code = exit_.code
-    return code, [line for line in capsys.readouterr().err.splitlines() if line.strip()]
 
 
 def one_line(code, lines, expected, exit_code=2):
