@@ -112,3 +112,27 @@ def test_unknown_group_option_fails():
 def test_out_of_range_values_are_config_errors(override, message):
     with pytest.raises(ConfigError, match=message):
         validate_config(compose_config(override.split()))
+
+
+def test_recipe_v3_is_recipe_v2_and_its_three_pre_registered_values():
+    """legged_trot_v3 (issue 72 item 5's pre-registration) = legged_trot_v2 + C2's two weights + the row count the
+    rebuild check chose; nothing else differs, so v2's frozen file stays what v3 builds on."""
+    from omegaconf import OmegaConf
+
+    def flat(recipe):
+        cfg = OmegaConf.to_container(compose_config([f"experiment={recipe}", "env.xml_file=menagerie/unitree_go1/scene.xml"]))
+
+        def walk(node, prefix=""):
+            for key, value in node.items():
+                if isinstance(value, dict):
+                    yield from walk(value, f"{prefix}{key}.")
+                else:
+                    yield f"{prefix}{key}", value
+
+        return dict(walk(cfg))
+
+    v2, v3 = flat("legged_trot_v2"), flat("legged_trot_v3")
+    assert v2.keys() == v3.keys()
+    changed = {key: (v2[key], v3[key]) for key in v2 if v2[key] != v3[key]}
+    assert changed == {"env.legged.gait_clock_weight": (0.5, 1.5), "env.legged.torque_cost_weight": (0.84, 1.68),
+                       "collector.num_envs": (1, 8)}
