@@ -15,6 +15,12 @@ from ppo_torchrl.overrides import key_hint
 CONF_DIR = str(Path(__file__).resolve().parent.parent / "conf")
 
 
+def env_files() -> list[str]:
+    """The env ids that have a file in conf/env (plus the generic `gym`); no heavy import, so a refusal of
+    `env=<name>` answers before torch is loaded."""
+    return sorted(p.stem for p in (Path(CONF_DIR) / "env").glob("*.yaml"))
+
+
 def run_name(experiment, env_choice, env_id, xml_file) -> str:
     """What a run dir is named by (conf/config.yaml: hydra.run.dir): the preset, else the env file
     (quadruped_step), else for env=gym the id; a model file given to env=mjcf adds its stem, to env=legged

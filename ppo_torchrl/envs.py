@@ -37,7 +37,6 @@ from ppo_torchrl.positions import resumable
 warnings.filterwarnings("ignore", message=".*is out of date.*")
 warnings.filterwarnings("ignore", category=DeprecationWarning, module="gymnasium")
 
-CONF_ENV_DIR = Path(__file__).resolve().parent.parent / "conf" / "env"
 ASSETS_DIR = Path(__file__).resolve().parent / "assets"
 MJCF_ID = "mjcf"  # env.id of a robot given by its model file (env=mjcf env.xml_file=...)
 MJCF_ENV_ID = "Ant-v5"  # Gymnasium's locomotion class that runs it: it takes any model through xml_file
@@ -69,15 +68,12 @@ class EnvSpec:
             env.close()
 
 
-def env_files() -> list[str]:
-    """The env ids that have a file in conf/env (plus the generic `gym`)."""
-    return sorted(p.stem for p in CONF_ENV_DIR.glob("*.yaml"))
-
-
 def check_env_id(env_id: str) -> None:
     """Fail with one line unless `env_id` is a registered continuous-control Gymnasium env (or mjcf)."""
     if env_id not in gym.registry and env_id != MJCF_ID:
         from ppo_torchrl.envs_playground import playground_hint
+
+        from ppo_torchrl.compose import env_files
 
         known = ", ".join(n for n in env_files() if n != "gym")
         raise ConfigError(

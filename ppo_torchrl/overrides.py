@@ -171,7 +171,7 @@ def closest(word: str, known) -> Optional[str]:
 
 def check_env_override(overrides: list[str]) -> None:
     """`env=<name>` must name a file in conf/env: the closest file (or registered Gymnasium id) is named."""
-    from ppo_torchrl.envs import env_files
+    from ppo_torchrl.compose import env_files
 
     for arg in overrides:
         if arg.startswith("env="):

@@ -12,11 +12,11 @@ from pathlib import Path
 from omegaconf import OmegaConf
 
 from ppo_torchrl.collectors.choice import describe_backend
+from ppo_torchrl.compose import CONF_DIR
 from ppo_torchrl.config import Config
 from ppo_torchrl.envs import MJCF_ID, env_label
 from ppo_torchrl.loggers import job_tag
 
-CONF_DIR = Path(__file__).resolve().parent.parent / "conf"
 NOT_SHOWN = ("env.", "seed", "resume")  # the env is named anyway; the seed and resume dir are the user's
 # loss.<key>: the losses that read it (losses.py); every loss reads the others
 POLICY_GRADIENT = ("clip_ppo", "kl_ppo", "ppo", "a2c")  # reinforce has no entropy bonus nor critic coefficient
@@ -98,7 +98,7 @@ def user_values(cli_overrides: list[str]) -> dict:
     users = {}
     for override in cli_overrides:
         key, _, option = override.lstrip("+~").partition("=")
-        group_file = CONF_DIR / key / f"{option}.yaml"
+        group_file = Path(CONF_DIR) / key / f"{option}.yaml"
         if "." not in key and "/" not in key and group_file.is_file():
             text = group_file.read_text()
             if "@package _global_" not in text:  # env files and presets are what the line describes
