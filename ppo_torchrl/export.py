@@ -87,15 +87,15 @@ def main(argv: list[str]) -> Path:
         output_dir_for(run_dir, run_dir) / "policy.pt"  # a shipped run (zoo/, results/): under outputs/, its path
     read(holder(target))  # out= in another run dir: that one is read (and written) too
     cfg, ac, state = load_policy(run_dir, str(checkpoint))
-    deploy = [target.parent / name for name in DEPLOY_FILES] if cfg.env.get("legged") is not None else []
+    deploy = deploy_paths(target) if cfg.env.get("legged") is not None else []
     check_replaceable(run_dir, [target, *deploy])  # a policy.pt (or policy.json ...) the app did not write: left alone
     why = unwritable(target.parent)
     if why:
         raise ConfigError(f"cannot write {target}: {why}; copy the run dir somewhere writable")
+    # a robot: ONNX beside it, the layout it takes, the deploy check; made and checked before anything is written
+    files = deploy_files(cfg, ac, state["normalization"]["obs"], target) if cfg.env.get("legged") is not None else []
     path = export_policy(cfg, ac, state["normalization"]["obs"], target, owner=run_dir)
-    written = [path]
-    if cfg.env.get("legged") is not None:  # a robot: ONNX beside it, the layout it takes, the deploy check
-        written += export_deploy(cfg, ac, state["normalization"]["obs"], target.parent, run_dir)
+    written = [path, *write_deploy(files, run_dir)]
     if is_run(run_dir):
         record(run_dir, written)
     print(f"exported {cfg.env.id} policy ({label(checkpoint)}, {state['frames']} frames) to {path}"
@@ -104,13 +104,44 @@ def main(argv: list[str]) -> Path:
     return path
 
 
-DEPLOY_FILES = ("policy.onnx", "policy.json", "deploy_mujoco.py")
+def deploy_paths(target: Path) -> list:
+    """A legged policy's deploy files beside its `<name>.pt`: `<name>.onnx`, `<name>.json`, deploy_mujoco.py."""
+    return [target.with_suffix(".onnx"), target.with_suffix(".json"), target.with_name("deploy_mujoco.py")]
 
 
-def export_deploy(cfg, ac: ActorCritic, obs_stats: Optional[dict], directory: Path, owner: Optional[Path]) -> list:
-    """A legged run's deploy files beside policy.pt: policy.onnx (the same module), policy.json (the observation
-    layout and action mapping a robot feeds it: tasks/locomotion/deploy.py) and deploy_mujoco.py (drives it in plain
-    MuJoCo from those alone)."""
+def _not_ours_outside_a_run(path: Path, new: bytes) -> Optional[str]:
+    """Outside any run dir no manifest says what the app wrote: a file already at `path` with other bytes than
+    `new` is a user's (or an older export's) and is left alone; one line says so."""
+    from ppo_torchrl.ownership import holder
+
+    if holder(path) is not None or not (path.exists() or path.is_symlink()):
+        return None
+    try:
+        if path.is_file() and not path.is_symlink() and path.read_bytes() == new:
+            return None
+    except OSError:
+        pass
+    return (f"{path} exists and is not this app's to replace (no run dir holds it); export writes "
+            f"{', '.join(p.name for p in deploy_paths(path.with_suffix('.pt'))[:2])} and deploy_mujoco.py beside "
+            "the policy: move it away, or give out= a new dir")
+
+
+def export_deploy(cfg, ac: ActorCritic, obs_stats: Optional[dict], target: Path, owner: Optional[Path]) -> list:
+    """Write a legged policy's deploy files beside `target` (its `<name>.pt`): deploy_files, then write_deploy."""
+    return write_deploy(deploy_files(cfg, ac, obs_stats, target), owner)
+
+
+def write_deploy(files: list, owner: Optional[Path]) -> list:
+    for path, data in files:
+        atomic_write_bytes(path, lambda f, data=data: f.write(data), owner)  # a kill: the old file or the new one
+    return [path for path, _ in files]
+
+
+def deploy_files(cfg, ac: ActorCritic, obs_stats: Optional[dict], target: Path) -> list:
+    """[(path, bytes)] of a legged run's deploy files beside its policy `<name>.pt`: `<name>.onnx` (the same module),
+    `<name>.json` (the observation layout and action mapping a robot feeds it, and the policy's file name:
+    tasks/locomotion/deploy.py) and deploy_mujoco.py (drives it in plain MuJoCo from those alone). Outside a run dir,
+    a file already there with other bytes: one ConfigError line, before anything is written."""
     import io
     import json
 
@@ -126,13 +157,14 @@ def export_deploy(cfg, ac: ActorCritic, obs_stats: Optional[dict], directory: Pa
         torch.onnx.export(module, (torch.zeros(1, obs_dim, dtype=torch.float64),), buffer, dynamo=False,
                           input_names=["observation"], output_names=["action"],
                           dynamic_axes={"observation": {0: "batch"}, "action": {0: "batch"}})
-    paths = [directory / name for name in DEPLOY_FILES]
-    atomic_write_bytes(paths[0], lambda f: f.write(buffer.getvalue()), owner)
-    text = json.dumps(deploy.manifest(cfg), indent=1).encode()
-    atomic_write_bytes(paths[1], lambda f: f.write(text), owner)
-    script = Path(deploy_mujoco.__file__).read_bytes()
-    atomic_write_bytes(paths[2], lambda f: f.write(script), owner)
-    return paths
+    files = list(zip(deploy_paths(target), [
+        buffer.getvalue(), json.dumps({**deploy.manifest(cfg), "policy": target.name}, indent=1).encode(),
+        Path(deploy_mujoco.__file__).read_bytes()]))
+    for path, data in files:
+        why = _not_ours_outside_a_run(path, data)
+        if why:
+            raise ConfigError(why)
+    return files
 
 
 if __name__ == "__main__":

@@ -50,8 +50,9 @@ def _export():
     help = {"run": "the run dir whose policy is exported (or latest, latest/<env>); writes <run dir>/policy.pt (for a "
                    "shipped run under zoo/ or results/: outputs/<its path>/policy.pt)",
             "checkpoint": "best, last, or a checkpoint file",
-            "out": "where policy.pt goes instead: a dir (its policy.pt) or a file ending in .pt (a legged run's "
-                   "policy.onnx, policy.json and deploy_mujoco.py go beside it)"}
+            "out": "where policy.pt goes instead: a dir (its policy.pt) or a file <name>.pt (a legged run's "
+                   "<name>.onnx, <name>.json and deploy_mujoco.py go beside it; outside a run dir a file there with "
+                   "other bytes is left alone, one error line)"}
     about = ("Writes the policy as TorchScript: a raw observation in, the deterministic action within the bounds\n"
              "out, normalization baked in; it runs with torch alone: torch.jit.load('policy.pt')(obs).")
     spec = {"run": None, "checkpoint": "best", "out": ""}

@@ -166,3 +166,34 @@ def test_a_shipped_run_is_only_read_and_heights_in_metres_say_so(tmp_path, monke
     assert export.main([f"run={run}", "checkpoint=last"]).resolve() == (mirrored / "policy.pt").resolve()
     assert export.main([f"run={run}", "checkpoint=last", f"out={tmp_path / 'mine.pt'}"]) == tmp_path / "mine.pt"
     assert tree_digest(run) == before
+
+
+def test_export_outside_a_run_names_its_deploy_files_after_the_policy_and_leaves_a_users_files(tmp_path, capsys):
+    """export out=<dir>/mine.pt of a legged run wrote policy.onnx, policy.json and deploy_mujoco.py beside it, over a
+    user's files of those names (no run dir's manifest there to ask), and the deploy script looked for policy.pt.
+    Now they are mine.onnx and mine.json (which names mine.pt, the script's default), and a file already there with
+    other bytes is one line, exit 2, before anything is written; the same export again changes no byte."""
+    import json
+
+    from conftest import ROOT, ran
+    from ppo_torchrl import export
+    from ppo_torchrl.tasks.locomotion import deploy_mujoco
+
+    run = ROOT / "results" / "robots" / "legged_v2_2026-11-28" / "go1_seed12"
+    out = tmp_path / "robot"
+    out.mkdir()
+    (out / "mine.json").write_text("the user's own\n")
+    code, lines = ran(export.main, [f"run={run}", "checkpoint=last", f"out={out / 'mine.pt'}"], capsys)
+    assert code == 2 and len(lines) == 1 and lines[0].startswith(f"error: {out / 'mine.json'} exists"), lines
+    assert sorted(p.name for p in out.iterdir()) == ["mine.json"]
+    assert (out / "mine.json").read_text() == "the user's own\n"
+    (out / "mine.json").unlink()
+    assert export.main([f"run={run}", "checkpoint=last", f"out={out / 'mine.pt'}"]) == out / "mine.pt"
+    assert sorted(p.name for p in out.iterdir()) == ["deploy_mujoco.py", "mine.json", "mine.onnx", "mine.pt"]
+    assert json.loads((out / "mine.json").read_text())["policy"] == "mine.pt"
+    siblings = {p.name: p.read_bytes() for p in out.iterdir() if p.name != "mine.pt"}
+    export.main([f"run={run}", "checkpoint=last", f"out={out / 'mine.pt'}"])  # the same bytes: nothing refused
+    assert {p.name: p.read_bytes() for p in out.iterdir() if p.name != "mine.pt"} == siblings
+    capsys.readouterr()
+    assert deploy_mujoco.main([str(out / "mine.json"), "--commands", "forward:0.3,0,0:0.1"]) == 0  # mine.pt, found
+    assert json.loads(capsys.readouterr().out.splitlines()[0])["segment"] == "forward"

@@ -146,7 +146,7 @@ def test_policy_json_is_the_observation_the_env_gives_and_the_deploy_script_driv
     cfg = joystick()
     ac = make_actor_critic(cfg.policy, env_spec(cfg.env))
     export_policy(cfg, ac, None, tmp_path / "policy.pt")
-    written = export_deploy(cfg, ac, None, tmp_path, None)
+    written = export_deploy(cfg, ac, None, tmp_path / "policy.pt", None)
     assert [p.name for p in written] == ["policy.onnx", "policy.json", "deploy_mujoco.py"]
     manifest = json.loads((tmp_path / "policy.json").read_text())
     assert sum(p["size"] for p in manifest["observation"]) == manifest["obs_dim"]

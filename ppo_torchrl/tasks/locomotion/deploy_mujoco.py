@@ -150,7 +150,7 @@ def parse_commands(text: str) -> list:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("manifest")
-    p.add_argument("--policy", help="policy.pt or policy.onnx (default: policy.pt beside the manifest)")
+    p.add_argument("--policy", help="the .pt or .onnx (default: the .pt the manifest names, beside it)")
     p.add_argument("--model", help="the model file (default: the one the run trained on)")
     p.add_argument("--commands", default="forward:0.3,0,0:4;turn:0,0,0.25:4;left:0,0.25,0:4;stop:0,0,0:3")
     p.add_argument("--noise", type=float, default=0.0)
@@ -160,7 +160,7 @@ def main(argv=None) -> int:
         manifest = json.load(f)
     from pathlib import Path
 
-    policy_path = args.policy or str(Path(args.manifest).with_name("policy.pt"))
+    policy_path = args.policy or str(Path(args.manifest).with_name(manifest.get("policy", "policy.pt")))
     try:
         segments = parse_commands(args.commands)
     except ValueError:
