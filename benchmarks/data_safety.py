@@ -75,6 +75,39 @@ REAL_CASES = ("optuna", "crafted", "crafted")  # crafted: issue 76, item 3
 REAL_KINDS = API_KINDS  # the Python API's entry points (issue 76, item 3)
 OVERWRITES = ("overwrite", "sweep_overwrite", "trial_overwrite")
 ENV = {**os.environ, "PYTHONWARNINGS": "ignore"}
+# How a command is started: subprocess.Popen here; the tests set their launcher (tests/conftest.py: launch), a real
+# process forked from an interpreter that has imported the app's libraries once, taking the same arguments.
+LAUNCH = None
+
+
+def popen(argv, fsize=None, **kwargs):
+    """A process for `argv` (subprocess.Popen's keywords; fsize: RLIMIT_FSIZE in bytes, a write past it failing with
+    EFBIG, as on a full disk), with SIGINT as a terminal gives it: a harness started in the background (`cmd &`) has
+    SIGINT ignored, which its children would inherit (a Ctrl-C then does nothing: a wait on the next claim step, a
+    false hang)."""
+    if LAUNCH is not None:
+        return LAUNCH(argv, fsize=fsize, **kwargs)
+
+    def limit():
+        signal.signal(signal.SIGINT, signal.SIG_DFL)
+        if fsize is not None:
+            resource.setrlimit(resource.RLIMIT_FSIZE, (fsize, fsize))
+            signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+
+    return subprocess.Popen(argv, preexec_fn=limit, **kwargs)
+
+
+def finished(argv, timeout=300) -> tuple:
+    """Run `argv` to its end: (exit code, stderr); subprocess.TimeoutExpired past `timeout` (the process killed)."""
+    proc = popen(argv, cwd=ROOT, env=ENV, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                 text=True)
+    try:
+        _, err = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.communicate()
+        raise
+    return proc.returncode, err
 
 # One app command in its own process: argv = kind, run dir, a pause (s) between its steps (where kills land)[, out].
 COMMAND = r'''
@@ -290,18 +323,9 @@ def command(kind: str, run: Path, real: bool, pause: str = "0", extra=(), hooked
 def spawn(kind: str, run: Path, rng: random.Random, real: bool, extra=(), fsize=None, hooked=False):
     """Start one app command in its own process group (its claims stopped at each step if hooked), under a
     file-size limit of `fsize` bytes if given (a write past it fails, EFBIG, as on a full disk)."""
-    def limit():
-        # SIGINT as a terminal gives it: a harness started in the background (`cmd &`) has SIGINT ignored, which its
-        # children would inherit (a Ctrl-C then does nothing: a wait on the next claim step, a false hang)
-        signal.signal(signal.SIGINT, signal.SIG_DFL)
-        if fsize is not None:
-            resource.setrlimit(resource.RLIMIT_FSIZE, (fsize, fsize))
-            signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
-
-    proc = subprocess.Popen(command(kind, run, real, str(rng.choice([0.0, 0.01, 0.03])), extra, hooked), cwd=ROOT,
-                            env=ENV, stdin=subprocess.PIPE if hooked else subprocess.DEVNULL, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, start_new_session=True,
-                            preexec_fn=limit)
+    proc = popen(command(kind, run, real, str(rng.choice([0.0, 0.01, 0.03])), extra, hooked), fsize=fsize, cwd=ROOT,
+                 env=ENV, stdin=subprocess.PIPE if hooked else subprocess.DEVNULL, stdout=subprocess.PIPE,
+                 stderr=subprocess.PIPE, text=True, start_new_session=True)
     if not real and not hooked:
         proc.stdout.readline()  # "ready" (or nothing: it ended): the signal lands in the command's steps
     return proc
@@ -442,11 +466,10 @@ def stale_eval(tree, run: Path, ev: Path, real: bool):
     if not real:  # the run-dir steps' eval.json holds the sha256 of the last.pt it read
         now = digest(run / "checkpoints" / "last.pt") if (run / "checkpoints" / "last.pt").is_file() else None
         return None if made.get("checkpoint") in (None, now) else f"made from {made['checkpoint']}, last.pt is {now}"
-    again = subprocess.run([sys.executable, "-m", "ppo_torchrl.evaluate", f"run={run}", "episodes=2",
-                            f"out={tree.root / 'check'}"], cwd=ROOT, env=ENV, capture_output=True, text=True,
-                           timeout=300)
-    if again.returncode != 0:
-        return f"it cannot be evaluated again: {said(again.stderr) or again.stderr[-300:]}"
+    code, err = finished([sys.executable, "-m", "ppo_torchrl.evaluate", f"run={run}", "episodes=2",
+                          f"out={tree.root / 'check'}"])
+    if code != 0:
+        return f"it cannot be evaluated again: {said(err) or err[-300:]}"
     fresh = json.loads((tree.root / "check" / "eval.json").read_text())
     keys = ("checkpoint", "checkpoint_frames", "returns")
     return None if all(made.get(k) == fresh.get(k) for k in keys) else \
@@ -528,10 +551,9 @@ def start_tree(real: bool) -> Path:
     if real not in _START:
         root = Path(tempfile.mkdtemp(prefix="data_safety_start_"))
         for kind, name in (("new", "r0"), ("sweep", "r1"), ("trial", "r2")):
-            proc = subprocess.run(command(kind, root / name, real), cwd=ROOT, capture_output=True, text=True,
-                                  timeout=300)
-            if proc.returncode != 0:
-                raise RuntimeError(f"{kind} {name} exited {proc.returncode}: {proc.stderr[-600:]}")
+            code, err = finished(command(kind, root / name, real))
+            if code != 0:
+                raise RuntimeError(f"{kind} {name} exited {code}: {err[-600:]}")
         _START[real] = root
     return _START[real]
 
@@ -582,8 +604,7 @@ def sequence(seed: int, steps: int = 10, real: bool = False, log=None, kinds=Non
 
 def _plain(run: Path, real: bool = False) -> tuple:
     """overwrite=true in `run`, let finish."""
-    proc = subprocess.run(command("overwrite", run, real), cwd=ROOT, capture_output=True, text=True, timeout=300)
-    return proc.returncode, proc.stderr
+    return finished(command("overwrite", run, real))
 
 
 def main(argv=None) -> int:

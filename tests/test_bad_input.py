@@ -8,6 +8,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
@@ -18,7 +19,7 @@ from ppo_torchrl.lifecycle import resume_config
 from ppo_torchrl.errors import Interrupted, TrainingError, guarded
 from ppo_torchrl.trainer import Trainer
 
-from conftest import ROOT, TINY, run_cli
+from conftest import ROOT, TINY, App, run_cli
 
 MOTOR_WITHOUT_CTRLRANGE = """<mujoco><worldbody><body name="base" pos="0 0 0.5"><freejoint/>
 <geom type="sphere" size="0.1"/><body name="leg"><joint name="hip" type="hinge"/>
@@ -111,12 +112,12 @@ def tree_digest(directory):
 
 
 @pytest.fixture(scope="module")
-def finished_run(tmp_path_factory):
-    """A real finished run (4 iterations, checkpoints every iteration), via the CLI."""
-    run = tmp_path_factory.mktemp("finished") / "run"
-    result = run_cli("env=InvertedPendulum-v4", *TINY, "collector.total_frames=1024", f"hydra.run.dir={run}")
-    assert result.returncode == 0, result.stderr[-2000:]
-    return run
+def finished_run(cli_finished_run, tmp_path_factory):
+    """A real finished run (4 iterations, checkpoints every iteration), via the CLI: this module's own copy of the
+    test worker's one (conftest.cli_finished_run), so no module sees what another did to its copy."""
+    import shutil
+
+    return Path(shutil.copytree(cli_finished_run, tmp_path_factory.mktemp("finished") / "run", symlinks=True))
 
 
 @pytest.mark.parametrize("extra", [[], ["collector.total_frames=512"], ["optim.lr=-1"]])
@@ -145,8 +146,7 @@ def test_a_second_process_is_refused_while_the_first_writes(tmp_path):
     run = tmp_path / "run"
     args = ["env=InvertedPendulum-v4", "collector.total_frames=1000000", "collector.frames_per_batch=256",
             "eval.every_frames=0", "logger=none", "compile=false"]
-    first = subprocess.Popen([sys.executable, "-m", "ppo_torchrl", *args, f"hydra.run.dir={run}"], cwd=ROOT,
-                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    first = App([*args, f"hydra.run.dir={run}"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     try:
         deadline = time.time() + 60
         while time.time() < deadline and not (run / "metrics.csv").exists():

@@ -13,6 +13,10 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 import data_safety  # noqa: E402
 
+from conftest import launch  # noqa: E402
+
+data_safety.LAUNCH = launch  # its commands as real processes, forked from the tests' launcher (tests/appserver.py)
+
 
 @pytest.mark.parametrize("seed", [0, 6, 11, 18])
 def test_no_sequence_of_commands_kills_and_edits_loses_a_user_byte(seed):

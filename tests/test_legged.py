@@ -7,6 +7,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -15,6 +16,7 @@ import mujoco
 import numpy as np
 import pytest
 
+from conftest import run_app as launched
 from ppo_torchrl.errors import ConfigError
 
 ROBOTS_DIR = Path(__file__).resolve().parents[1] / "ppo_torchrl" / "assets" / "menagerie"
@@ -287,8 +289,7 @@ def test_a_scene_that_includes_its_robot_with_a_mesh_dir_and_its_keyframe_in_the
 
 
 def run_app(*args, cwd: Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "ppo_torchrl", *args], cwd=cwd, capture_output=True, text=True,
-                          timeout=600, env={**__import__("os").environ, "MUJOCO_GL": "egl"})
+    return launched(args, cwd=cwd, timeout=600, env={**os.environ, "MUJOCO_GL": "egl"})
 
 
 @pytest.mark.parametrize("bad, expected", [

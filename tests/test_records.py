@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import importlib.util
 import lzma
+import os
 import shutil
 import subprocess
 import sys
@@ -12,6 +13,7 @@ from pathlib import Path
 
 import pytest
 
+from conftest import run_app
 from ppo_torchrl import records
 from ppo_torchrl.report import read_metrics
 
@@ -109,8 +111,7 @@ def test_a_resume_keeps_the_bytes_of_the_rows_before_its_checkpoint(tmp_path):
 
 
 def test_the_records_command_refuses_bad_input_in_one_line(tmp_path):
-    out = subprocess.run([sys.executable, "-m", "ppo_torchrl.records", str(tmp_path / "missing.csv")],
-                         capture_output=True, text=True, cwd=ROOT)
+    out = run_app([str(tmp_path / "missing.csv")], module="ppo_torchrl.records", env=dict(os.environ))
     assert out.returncode == 2 and out.stderr.strip().count("\n") == 0 and out.stderr.startswith("error: ")
 
 

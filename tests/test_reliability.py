@@ -16,7 +16,7 @@ from ppo_torchrl.lifecycle import resume_config
 from ppo_torchrl.errors import ConfigError, Interrupted, TrainingError
 from ppo_torchrl.trainer import Trainer
 
-from conftest import ROOT, run_cli
+from conftest import ROOT, App, run_cli
 
 FOUR_ITERATIONS = ["collector.total_frames=1024", "eval.every_frames=512", "eval.episodes=1",
                    "checkpoint.every_frames=0", "logger=csv"]
@@ -139,9 +139,7 @@ def test_sigint_to_a_training_process_leaves_a_checkpoint_that_resumes(tmp_path)
     args = ["env=InvertedPendulum-v4", "collector.total_frames=1000000", "collector.frames_per_batch=512",
             "loss.minibatch_size=128", "eval.every_frames=0", "eval.final_episodes=1",
             "checkpoint.every_frames=0", f"hydra.run.dir={run}"]
-    env = {**os.environ, "PYTHONWARNINGS": "ignore"}
-    proc = subprocess.Popen([sys.executable, "-m", "ppo_torchrl", *args], cwd=ROOT, env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = App(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     deadline = time.time() + 120
     while time.time() < deadline:  # wait until a few iterations are done
         summary = run / "summary.json"

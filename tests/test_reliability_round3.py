@@ -17,7 +17,7 @@ from ppo_torchrl import checkpoint, lifecycle, rundir
 from ppo_torchrl.errors import Interrupted, exit_code, guarded, message_of
 from ppo_torchrl.trainer import Trainer
 
-from conftest import ROOT, TINY, run_cli
+from conftest import ROOT, TINY, App, run_cli
 from test_bad_input import finished_run, refused, tree_digest  # noqa: F401  (the module's finished run)
 
 RUN = ["env=InvertedPendulum-v4", *TINY]
@@ -279,8 +279,7 @@ def test_a_killed_collector_worker_is_one_line_and_a_failed_status(tmp_path):
     args = ["env=InvertedPendulum-v4", "collector.workers=2", "collector.frames_per_batch=256",
             "collector.total_frames=10000000", "eval.every_frames=0", "checkpoint.every_frames=256", "logger=none",
             "compile=false", f"hydra.run.dir={run}"]
-    process = subprocess.Popen([sys.executable, "-m", "ppo_torchrl", *args], cwd=ROOT, stderr=subprocess.PIPE, text=True,
-                               start_new_session=True)
+    process = App(args, stderr=subprocess.PIPE, start_new_session=True)
     try:
         deadline = time.time() + 300  # two workers' imports on a loaded 2-core machine: minutes, not seconds
         while time.time() < deadline and not (run / "checkpoints" / "last.pt").exists() and process.poll() is None:

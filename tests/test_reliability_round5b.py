@@ -14,7 +14,7 @@ import time
 
 import pytest
 
-from conftest import ROOT, compose_config
+from conftest import ROOT, App, compose_config, run_app
 from ppo_torchrl import evaluate, export, report
 from test_bad_input import finished_run, refused, tree_digest  # noqa: F401  (the module's finished run)
 from test_reliability_round3 import RUN, copy_of
@@ -25,10 +25,7 @@ GO1 = ROOT / "ppo_torchrl" / "assets" / "menagerie" / "unitree_go1"
 
 def start(module, *args):
     """An entry point in a process of its own (the second process of a test), its output in a pipe."""
-    env = {**os.environ, "PYTHONWARNINGS": "ignore"}
-    env.pop("PPO_TORCHRL_DEBUG", None)
-    return subprocess.Popen([sys.executable, "-m", module, *args], cwd=ROOT, env=env, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE, text=True)
+    return App(args, module=module, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
 
 
 def wait_for_lock(directory, kind, process, timeout=180):
@@ -108,8 +105,8 @@ def go1_run(tmp_path_factory):
     root = tmp_path_factory.mktemp("go1")
     shutil.copytree(GO1, root / "go1")
     run = root / "run"
-    done = subprocess.run([sys.executable, "-m", "ppo_torchrl", "env=legged", f"env.xml_file={root / 'go1' / 'scene.xml'}",
-                           *RUN[1:], f"hydra.run.dir={run}"], cwd=ROOT, capture_output=True, text=True, timeout=600)
+    done = run_app(["env=legged", f"env.xml_file={root / 'go1' / 'scene.xml'}", *RUN[1:], f"hydra.run.dir={run}"],
+                   timeout=600, env=dict(os.environ))
     assert done.returncode == 0, done.stderr[-2000:]
     return run, root / "go1" / "go1.xml"
 

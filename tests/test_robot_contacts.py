@@ -4,6 +4,7 @@ chosen by robots/recipe.py's rule (env.legged.physics_dt). Fast: a few Go1 envs,
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -11,6 +12,8 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pytest
+
+from conftest import run_app
 
 ROBOTS_DIR = Path(__file__).resolve().parents[1] / "ppo_torchrl" / "assets" / "menagerie"
 GO1 = ROBOTS_DIR / "unitree_go1" / "scene.xml"
@@ -195,9 +198,8 @@ def test_the_rule_keeps_each_bound_and_a_saved_run_keeps_its_model_s_step():
     ("env.legged.physics_dt=fast", "env.legged.physics_dt=fast must be rule, model or a step in seconds"),
 ])
 def test_a_bad_contacts_or_physics_step_is_one_error_line_and_exit_2(override, expected, tmp_path):
-    done = subprocess.run([sys.executable, "-m", "ppo_torchrl", "env=legged", f"env.xml_file={GO1}", override,
-                           f"hydra.run.dir={tmp_path / 'run'}"], cwd=tmp_path, capture_output=True, text=True,
-                          timeout=300)
+    done = run_app(["env=legged", f"env.xml_file={GO1}", override, f"hydra.run.dir={tmp_path / 'run'}"], cwd=tmp_path,
+                   env=dict(os.environ))
     assert done.returncode == 2, done.stderr
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error:") and expected in lines[0], done.stderr

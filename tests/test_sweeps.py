@@ -1,6 +1,7 @@
 """Multirun, Optuna, launcher configs, experiment presets and the sweep report."""
 
 import json
+import os
 import pickle
 
 import cloudpickle
@@ -11,7 +12,7 @@ from ppo_torchrl import report
 from ppo_torchrl.trainer import Trainer
 from ppo_torchrl.validation import validate_config
 
-from conftest import ROOT, TINY, compose_config, run_cli
+from conftest import ROOT, TINY, App, compose_config, run_cli
 
 PRESETS = ["arena_hopper", "practical_rl_halfcheetah", "reinforce_pendulum", "aidl_halfcheetah", "aidl_anymal",
            "aidl_anymal_step"]
@@ -252,8 +253,7 @@ def test_ctrl_c_in_a_stored_optuna_trial_marks_it_failed(tmp_path):
             "collector.frames_per_batch=256", "collector.total_frames=1000000", "eval.every_frames=0", "logger=none",
             "compile=false", "optim.lr=choice(1e-4,3e-4)", f"hydra.sweeper.storage={storage}",
             f"hydra.sweep.dir={sweep}"]
-    proc = subprocess.Popen([sys.executable, "-m", "ppo_torchrl", *args], cwd=ROOT, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE, text=True)
+    proc = App(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=dict(os.environ))
     try:
         deadline = time.time() + 240
         while time.time() < deadline and not list(sweep.glob("*/metrics.csv")) and proc.poll() is None:

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import torch
 
-from conftest import ROOT, TINY, run_cli
+from conftest import ROOT, TINY, App, run_cli
 from ppo_torchrl import evaluate, export
 from ppo_torchrl.normalization import pool
 from ppo_torchrl.errors import ConfigError
@@ -157,9 +157,7 @@ def test_ctrl_c_during_a_workers_run_saves_exits_130_leaves_no_workers_and_resum
     args = ["env=InvertedPendulum-v4", *WORKERS, "collector.frames_per_batch=256", "collector.total_frames=100000",
             "loss.epochs=1", "eval.every_frames=0", "eval.final_episodes=0", "checkpoint.every_frames=0",
             "logger=none", f"hydra.run.dir={run_dir}"]
-    env = {**os.environ, "PYTHONWARNINGS": "ignore"}
-    proc = subprocess.Popen([sys.executable, "-m", "ppo_torchrl", *args], cwd=ROOT, env=env, text=True,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
+    proc = App(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
     try:
         deadline = time.time() + 120
         metrics = run_dir / "metrics.csv"
