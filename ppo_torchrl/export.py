@@ -52,7 +52,7 @@ def deployed_policy(cfg, ac: ActorCritic, obs_stats: Optional[dict]) -> Deployed
         target = t.extra[0].get("_target_", "?")
         raise ConfigError(f"export: env.transforms.extra[0] ({target}) cannot be baked into policy.pt; "
                           "export supports the built-in normalization and clipping only")
-    obs_dim = ac.policy_net[0][0].in_features
+    obs_dim = ac.obs_dim
     normalizer = make_observation_normalizer(t, obs_dim, obs_stats, frozen=True)
     if obs_stats is None:
         normalizer.enabled = False
@@ -61,7 +61,7 @@ def deployed_policy(cfg, ac: ActorCritic, obs_stats: Optional[dict]) -> Deployed
 
 def export_policy(cfg, ac: ActorCritic, obs_stats: Optional[dict], path: Path, owner: Optional[Path] = None) -> Path:
     module = deployed_policy(cfg, ac, obs_stats)
-    obs_dim = ac.policy_net[0][0].in_features
+    obs_dim = ac.obs_dim
     example = torch.zeros(2, obs_dim)
     with torch.no_grad():
         scripted = torch.jit.trace(module, example)
@@ -148,7 +148,7 @@ def deploy_files(cfg, ac: ActorCritic, obs_stats: Optional[dict], target: Path) 
     from ppo_torchrl.tasks.locomotion import deploy, deploy_mujoco
 
     module = deployed_policy(cfg, ac, obs_stats)
-    obs_dim = ac.policy_net[0][0].in_features
+    obs_dim = ac.obs_dim
     import warnings
 
     buffer = io.BytesIO()

@@ -90,6 +90,11 @@ class ActorCritic:
     action_low: torch.Tensor
     action_high: torch.Tensor
 
+    @property
+    def obs_dim(self) -> int:
+        """The size of the observation the actor reads (what export traces and predict() checks)."""
+        return int(self.policy_net[0][0].in_features)
+
 
 def validate_policy_config(cfg) -> None:
     if cfg.head not in HEADS:
