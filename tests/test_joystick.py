@@ -196,3 +196,20 @@ def test_a_drive_segment_shorter_than_a_control_step_is_one_line(tmp_path):
         drive(make_batch, cfg, ac, None, [("go", [0.3, 0.0, 0.0], 1.0), ("blink", [0.0, 0.0, 0.0], 0.001)],
               tmp_path / "drive.mp4", 0, owner=None)
     assert not (tmp_path / "drive.mp4").exists()
+
+
+def test_a_joystick_runs_start_line_names_its_commands_not_a_step_and_a_target_speed():
+    """The start line of experiment=legged_joystick said "step 10.7 cm (0.25 l), speed up to 0.71 m/s": a climb
+    recipe's task, which a joystick run has not. It now says the commands' ranges in SI and how often they change;
+    the climb recipes' line is as before."""
+    from ppo_torchrl.envs import resolve_model_file
+    from ppo_torchrl.robots.model import read_robot
+    from ppo_torchrl.robots.recipe import describe
+
+    robot = read_robot(resolve_model_file(GO1))
+    line = describe(robot, joystick().env.legged)
+    assert "step " not in line and "speed up to" not in line, line
+    vx = 0.5 * robot.speed_scale
+    assert f"commands vx {-vx:+.2f} to {vx:+.2f} m/s" in line and "standing, drawn again every" in line, line
+    climb = describe(robot, compose_config(["experiment=legged_trot_v2", f"env.xml_file={GO1}"]).env.legged)
+    assert "recipe: step 10.7 cm (0.25 l), speed up to" in climb, climb

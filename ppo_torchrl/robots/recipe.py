@@ -157,11 +157,18 @@ def describe(robot: Robot, legged) -> str:
     scales = robot.action_scales(legged.action_scale, legged.get("saturation_cap", True))
     reach = f"{min(scales):.2f}" + (f"-{max(scales):.2f}" if max(scales) > min(scales) else "")
     dt = loco["physics_dt"]
-    return (f"{robot.describe()}; recipe: step {terrain['eval_step_height'] * 100:.1f} cm (0.25 l), speed up to "
-            f"{loco['target_speed']:.2f} m/s, fall under {loco['healthy_z_range'][0] * 100:.1f} cm, actions move "
+    command = loco["command"]
+    if command["kind"] == "velocity":  # a joystick: what it is told, not a step and a target speed it has not
+        span = lambda r, unit: f"{r[0]:+.2f} to {r[1]:+.2f} {unit}"  # noqa: E731
+        task = (f"commands vx {span(command['vx'], 'm/s')}, vy {span(command['vy'], 'm/s')}, yaw "
+                f"{span(command['yaw'], 'rad/s')}, {command['stand_share']:.0%} standing, drawn again every "
+                f"{command['resample'][0]:.1f}-{command['resample'][1]:.1f} s")
+    else:
+        task = (f"step {terrain['eval_step_height'] * 100:.1f} cm ({legged.step_height:g} l), speed up to "
+                f"{loco['target_speed']:.2f} m/s")
+    return (f"{robot.describe()}; recipe: {task}, fall under {loco['healthy_z_range'][0] * 100:.1f} cm, actions move "
             f"joints up to {reach} rad, control every {loco['frame_skip'] * dt * 1000:g} ms (physics "
-            f"{dt * 1000:g} ms, contacts: {loco['contacts']}){clock}"
-            ).replace("(0.25 l)", f"({legged.step_height:g} l)")
+            f"{dt * 1000:g} ms, contacts: {loco['contacts']}){clock}")
 
 
 def scaled_env(env_cfg, robot: Robot):
