@@ -18,7 +18,8 @@ from typing import Optional
 
 from ppo_torchrl import signals
 from ppo_torchrl.errors import EXIT_SIGNAL, guarded, signal_in_chain
-from ppo_torchrl.compose import CONF_DIR, compose, hydra_value, register_resolvers, show_job
+from ppo_torchrl.compose import compose, hydra_value, register_resolvers, show_job
+from ppo_torchrl.conf_files import CONF_DIR
 from ppo_torchrl.overrides import (HELP_FLAGS, INFO_FLAGS, checked_overrides, plain_keys, split_args, unquote,
                                    with_override)
 from ppo_torchrl.lifecycle import Lifecycle, Start

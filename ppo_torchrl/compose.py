@@ -9,16 +9,9 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from ppo_torchrl.conf_files import CONF_DIR
 from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.overrides import key_hint
-
-CONF_DIR = str(Path(__file__).resolve().parent.parent / "conf")
-
-
-def env_files() -> list[str]:
-    """The env ids that have a file in conf/env (plus the generic `gym`); no heavy import, so a refusal of
-    `env=<name>` answers before torch is loaded."""
-    return sorted(p.stem for p in (Path(CONF_DIR) / "env").glob("*.yaml"))
 
 
 def run_name(experiment, env_choice, env_id, xml_file) -> str:

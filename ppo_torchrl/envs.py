@@ -73,7 +73,7 @@ def check_env_id(env_id: str) -> None:
     if env_id not in gym.registry and env_id != MJCF_ID:
         from ppo_torchrl.envs_playground import playground_hint
 
-        from ppo_torchrl.compose import env_files
+        from ppo_torchrl.conf_files import env_files
 
         known = ", ".join(n for n in env_files() if n != "gym")
         raise ConfigError(

@@ -13,6 +13,7 @@ import os
 import re
 from typing import Optional
 
+from ppo_torchrl.conf_files import env_files
 from ppo_torchrl.errors import ConfigError
 
 # Hydra flags that print or inspect instead of running a job; those marked take a value.
@@ -171,8 +172,6 @@ def closest(word: str, known) -> Optional[str]:
 
 def check_env_override(overrides: list[str]) -> None:
     """`env=<name>` must name a file in conf/env: the closest file (or registered Gymnasium id) is named."""
-    from ppo_torchrl.compose import env_files
-
     for arg in overrides:
         if arg.startswith("env="):
             available = env_files()

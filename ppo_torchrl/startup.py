@@ -12,7 +12,7 @@ from pathlib import Path
 from omegaconf import OmegaConf
 
 from ppo_torchrl.collectors.choice import describe_backend
-from ppo_torchrl.compose import CONF_DIR
+from ppo_torchrl.conf_files import CONF_DIR
 from ppo_torchrl.config import Config
 from ppo_torchrl.envs import MJCF_ID, env_label
 from ppo_torchrl.loggers import job_tag
