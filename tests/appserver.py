@@ -109,11 +109,21 @@ def serve(path: str):
     while os.getppid() == parent and not ended:
         for _ in selector.select(timeout=0.05):
             conn, _ = listener.accept()
-            conn.settimeout(10)
-            data, fds, _, _ = socket.recv_fds(conn, 1 << 20, 3)
-            while not data.endswith(b"\n"):
-                data += conn.recv(1 << 20)
-            request = json.loads(data)
+            conn.settimeout(10)  # a client that stalls mid-request is dropped, never waited on for good
+            fds = []
+            try:
+                data, fds, _, _ = socket.recv_fds(conn, 1 << 20, 3)
+                while data and not data.endswith(b"\n"):
+                    more = conn.recv(1 << 20)
+                    data = data + more if more else b""  # the client went away mid-request
+                request = json.loads(data) if data else None
+            except (OSError, ValueError):
+                request = None
+            if request is None or len(fds) != 3:
+                for fd in fds:
+                    os.close(fd)
+                conn.close()
+                continue
             sys.stdout.flush()
             sys.stderr.flush()
             pid = os.fork()
