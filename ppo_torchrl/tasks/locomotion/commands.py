@@ -110,7 +110,5 @@ def make_command(n: int, world, legged: dict, dt: float):
     if kind == "heading":
         return HeadingCommand(n, world, legged.get("target_speed"))
     if kind == "velocity":
-        robot = world.robot
-        return VelocityCommand(n, world, command, dt, robot.speed_scale if robot else 1.0,
-                               robot.time_scale if robot else 1.0)
+        return VelocityCommand(n, world, command, dt, *world.units)
     raise ConfigError(f"env.legged.command.kind={kind} is not known; use heading or velocity")

@@ -55,7 +55,7 @@ def manifest(cfg) -> dict:
             if task.height_samples > 1 else 0.0,
             "gait_period": task.period,
             "command_scale": task.command.scale.tolist() if task.command.size else None,
-            "speed_scale": robot.speed_scale if robot else 1.0, "time_scale": robot.time_scale if robot else 1.0,
+            "speed_scale": world.units[0], "time_scale": world.units[1],
             "action": {"joints": joints, "home_angle": [float(x) for x in world.home_ctrl / _gears(world)],
                        "scale": [float(x) for x in world.ctrl_per_action / _gears(world)],
                        "low": [_finite(x) for x in world.ctrl_low / _gears(world)],

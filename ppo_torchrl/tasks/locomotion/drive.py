@@ -63,7 +63,8 @@ def drive(make_batch, cfg, ac, obs_stats, segments: list, path: Path, seed: int,
         world, task = batch.world, batch.task
         if task.command.size != 3:
             raise ConfigError("drive= steers a joystick run (env.legged.command.kind=velocity)")
-        speed, rate = (world.robot.speed_scale, 1.0 / world.robot.time_scale) if world.robot else (1.0, 1.0)
+        speed, time = world.units
+        rate = 1.0 / time
         every = max(1, math.ceil((1.0 / world.dt) / VIDEO_MAX_FPS - 1e-9))
         short = [name for name, _, s in segments if round(s / world.dt) < 1]
         if short:  # a segment of no control step would measure nothing

@@ -43,13 +43,12 @@ class Randomization:
         self.fixed: list = [None] * n  # a draw to replay at the row's next resets (evaluate)
         self.delayed = np.zeros(n, bool)
         self.push_countdown = np.full(n, -1, np.int64)
-        robot = world.robot
-        speed, rate = (robot.speed_scale, 1.0 / robot.time_scale) if robot else (1.0, 1.0)
-        self.noise_scale = self._noise_scale(speed, rate) * self.obs_noise
+        speed, time = world.units
+        self.noise_scale = self._noise_scale(speed, 1.0 / time) * self.obs_noise
 
     def _noise_scale(self, speed: float, rate: float) -> np.ndarray:
         """Per element of Ant-v5's observation (qpos[2:], qvel): the noise at level 1 (NOISE)."""
-        model, w = self.world.model, self.world
+        model = self.world.model
         nq, nv = model.nq, model.nv
         scale = np.zeros(nq - 2 + nv)
         scale[:5] = NOISE["height_attitude"]  # the free joint's z and quaternion
@@ -57,7 +56,6 @@ class Randomization:
         scale[nq - 2:nq - 2 + 3] = NOISE["linear"] * speed
         scale[nq - 2 + 3:nq - 2 + 6] = NOISE["angular"] * rate
         scale[nq - 2 + 6:] = NOISE["joint_speed"] * rate
-        del w
         return scale
 
     def fix(self, i: int, draw: Optional[dict]) -> None:

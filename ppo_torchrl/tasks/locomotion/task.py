@@ -90,9 +90,8 @@ class LeggedTask:
         self.noise = float(kwargs.get("reset_noise_scale", 0.1))
         target = legged.get("base_height_target")
         command = legged.get("command") or {}
-        robot = world.robot
         self.params = {"dt": world.dt, "healthy_reward": weights["survive"],
-                       "speed": robot.speed_scale if robot else 1.0, "time": robot.time_scale if robot else 1.0,
+                       "speed": world.units[0], "time": world.units[1],
                        "sigma_lin": float(command.get("sigma_lin", 0.25)), "sigma_yaw": float(command.get("sigma_yaw", 0.25)),
                        "home_angle": world.init_qpos[world.act_qpos],
                        "joint_speed_limit": legged.get("joint_speed_limit"),

@@ -69,7 +69,8 @@ def track(make_batch, cfg, ac, obs_stats: Optional[dict], episodes: int, seed: i
         batch = make_batch(cfg.env, rows, evaluation=True)
         try:
             world, task = batch.world, batch.task
-            speed, rate = (world.robot.speed_scale, 1.0 / world.robot.time_scale) if world.robot else (1.0, 1.0)
+            speed, time = world.units
+            rate = 1.0 / time
             settle = round(settle_time / rate / world.dt)
             steps = settle + round(measure_time / rate / world.dt)
             if steps > batch.max_steps:

@@ -77,6 +77,12 @@ class World:
     step_geom: int
     contact_filter: Optional[tuple]  # env.legged.contacts=terrain: (robot geoms kept, dropped); None otherwise
 
+    @property
+    def units(self) -> tuple:
+        """(speed, time): the robot's units, sqrt(g l) in m/s and sqrt(l / g) in s (a yaw rate's is 1 / time); (1, 1),
+        SI itself, for a model without a robot read from it (env=mjcf)."""
+        return (self.robot.speed_scale, self.robot.time_scale) if self.robot else (1.0, 1.0)
+
     def row_model(self) -> mujoco.MjModel:
         """A row's own copy of the model."""
         return copy.copy(self.model)
