@@ -341,7 +341,16 @@ def cut(procs: list, rng: random.Random, within: float) -> None:
             try:
                 proc.wait(timeout=max(0.0, start + at - time.time()))
             except subprocess.TimeoutExpired:
-                os.killpg(proc.pid, signum)
+                signal_group(proc, signum)
+
+
+def signal_group(proc, signum) -> None:
+    """`signum` to the command's process group; none left (it ended between the wait and now, and was reaped:
+    the tests' launcher reaps at once) is the command let finish."""
+    try:
+        os.killpg(proc.pid, signum)
+    except ProcessLookupError:
+        pass
 
 
 def ended(proc) -> tuple:
@@ -349,7 +358,7 @@ def ended(proc) -> tuple:
     try:
         _, err = proc.communicate(timeout=300)
     except subprocess.TimeoutExpired:
-        os.killpg(proc.pid, signal.SIGKILL)
+        signal_group(proc, signal.SIGKILL)
         return None, "hang: still running after 300 s\n" + proc.communicate()[1]
     return proc.returncode, err
 
@@ -482,7 +491,7 @@ def claim_cut(tree, rng, real) -> tuple:
     kind = rng.choice(["overwrite", *OVERWRITES] if top.exists() else ["new", "sweep", "trial"])
     k, signum = rng.randrange(8 if kind in ("overwrite", "new") else 14), rng.choice([signal.SIGINT, signal.SIGKILL])
     before, proc, n = siblings(top), spawn(kind, top, rng, real, hooked=True), 0
-    hang = threading.Timer(300, os.killpg, (proc.pid, signal.SIGKILL))
+    hang = threading.Timer(300, signal_group, (proc, signal.SIGKILL))
     hang.start()
     for line in proc.stdout:  # (stderr stays in its pipe: a few kB)
         if line.startswith("claim-step"):

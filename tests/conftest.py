@@ -125,14 +125,12 @@ class App:
     def _message(self, timeout):
         """The launcher's next JSON line; subprocess.TimeoutExpired when none comes within `timeout` (None: wait)."""
         deadline = None if timeout is None else time.monotonic() + timeout
-        while b"\n" not in self._buffer:
-            left = None if deadline is None else deadline - time.monotonic()
-            if left is not None and left <= 0:
-                raise subprocess.TimeoutExpired(self.args, timeout)
-            self._conn.settimeout(left)
+        while b"\n" not in self._buffer:  # each turn reads once at least: poll() sees a status already sent
+            left = None if deadline is None else max(deadline - time.monotonic(), 0.0)
+            self._conn.settimeout(left)  # 0.0: a read that does not wait
             try:
                 data = self._conn.recv(4096)
-            except (TimeoutError, socket.timeout):
+            except (BlockingIOError, TimeoutError, socket.timeout):
                 raise subprocess.TimeoutExpired(self.args, timeout) from None
             if not data:
                 raise RuntimeError("the tests' app launcher ended before the launch did")
@@ -147,7 +145,7 @@ class App:
     def poll(self):
         if self.returncode is None:
             try:
-                self._status(0.0001)
+                self._status(0.0)
             except subprocess.TimeoutExpired:
                 pass
         return self.returncode
