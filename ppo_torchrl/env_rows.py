@@ -11,14 +11,15 @@ far); `metrics()` (what each row reports: a step env's curriculum, a task's rewa
 keys beyond loggers.COLUMNS that metrics.csv gets a column for); `positions()`,
 `restore(positions)` (now) and `hold(positions)` (at each row's next reset: TorchRL's Collector resets first);
 `layout()`; `privileged_layout()` (the layout of the env's privileged observation, None without one: what
-policy.critic_obs=privileged gives the critic); `gym_env()`, a Gymnasium env a TorchRL GymWrapper wraps.
+policy.critic_obs=privileged gives the critic) and `privileged(rows)` (that observation now, raw: after a step, or
+after `reset_row(i)` for `rows=slice(i, i + 1)`); `gym_env()`, a Gymnasium env a TorchRL GymWrapper wraps.
 
 The privileged observation, for any env kind: the env declares `privileged_layout()` (its Gymnasium env's unwrapped
 env, or the batched env), the rows return it here, `make_torchrl_env(privileged=True)` gives EnvState a normalizer of
 its own for it, and the env's collector writes it normalized into the batch under layout.PRIVILEGED and
-("next", PRIVILEGED), which the critic reads. Today env=playground's rows (envs_playground.PlaygroundRows) and
-collector (collectors/playground.py) do; the fast collector's rollout of GymRows / BatchRows does not write it yet, so
-validation refuses policy.critic_obs=privileged for an env whose rows declare none.
+("next", PRIVILEGED), which the critic reads: env=playground's rows (envs_playground.PlaygroundRows) and collector
+(collectors/playground.py), and env=legged's batch (tasks/locomotion/task.py says what it holds) through the fast
+collector. Gymnasium's envs declare none, so validation refuses policy.critic_obs=privileged for them.
 """
 
 from __future__ import annotations
@@ -83,6 +84,9 @@ class GymRows:
     def privileged_layout(self) -> Optional[ObservationLayout]:
         return privileged_layout_of(self.envs[0])
 
+    def privileged(self, rows=slice(None)) -> np.ndarray:
+        raise NotImplementedError("Gymnasium's envs of one env per row give no privileged observation")
+
     def gym_env(self) -> gym.Env:
         if self.n == 1:
             return self.envs[0]
@@ -134,6 +138,9 @@ class BatchRows:
 
     def privileged_layout(self) -> Optional[ObservationLayout]:
         return privileged_layout_of(self.batch)
+
+    def privileged(self, rows=slice(None)) -> np.ndarray:
+        return self.batch.privileged(rows)
 
     def gym_env(self):
         return self.batch

@@ -65,13 +65,17 @@ class EnvState(Transform):
         # rather than normalizing the raw one again with statistics that have moved since); the rows the next full
         # reset gives back (continue_episodes(now=False)); the statistics before a full reset no step has followed.
         self._emitted: Optional[np.ndarray] = None
+        self._emitted_privileged: Optional[np.ndarray] = None
         self._replay: Optional[np.ndarray] = None
         self._before_reset: Optional[dict] = None
 
     # ------------------------------------------------------------------ what each policy acts on next
-    def emit(self, rows: np.ndarray, mask: Optional[np.ndarray] = None) -> None:
+    def emit(self, rows: np.ndarray, mask: Optional[np.ndarray] = None, privileged: Optional[np.ndarray] = None) -> None:
         """The normalized observations each env's policy acts on next: all of them, or the rows of `mask` (a
-        partial reset of batched envs)."""
+        partial reset of batched envs); privileged: the normalized privileged observations the critic reads with them
+        (the fast collector's, all rows), saved beside them for a bit-exact resume."""
+        if privileged is not None:
+            self._emitted_privileged = np.asarray(privileged).copy()
         rows = np.asarray(rows)
         if mask is None or self._emitted is None or self._emitted.shape != rows.shape:
             self._emitted = rows.copy()
@@ -157,6 +161,7 @@ class EnvState(Transform):
             self.rows.hold(held["envs"])
         if now:
             self._emitted = held["acted_on"]
+            self._emitted_privileged = held.get("privileged_acted_on")
         else:
             self._replay = held["acted_on"]
         return True
@@ -167,11 +172,16 @@ class EnvState(Transform):
                 "reward": self.reward_norm.state_dict() if self.reward_norm is not None else None,
                 "privileged": self.privileged_norm.state_dict() if self.privileged_norm is not None else None,
                 "metrics": self.env_metrics(),
-                "positions": {"envs": self.positions(), "acted_on": self.acted_on()} if positions else None}
+                "positions": {"envs": self.positions(), "acted_on": self.acted_on(),
+                              "privileged_acted_on": self.privileged_acted_on()} if positions else None}
 
     def acted_on(self) -> Optional[np.ndarray]:
         """The normalized observation each env's policy acts on next (None before any): a copy."""
         return None if self._emitted is None else np.asarray(self._emitted).copy()
+
+    def privileged_acted_on(self) -> Optional[np.ndarray]:
+        """The normalized privileged observation the critic reads with `acted_on()` (None where none is written)."""
+        return None if self._emitted_privileged is None else self._emitted_privileged.copy()
 
     def restore(self, snapshot: dict, returns: bool = True) -> None:
         """Load the parts of `snapshot` given: the statistics (each env's discounted return too when

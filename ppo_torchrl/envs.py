@@ -365,24 +365,25 @@ def batched(env_cfg) -> bool:
 
 
 def make_batch(env_cfg, num_envs: int = 1, evaluation: bool = False, render_mode: Optional[str] = None,
-               threads: Optional[int] = None, **render_kwargs):
-    """The batched legged env of `env_cfg`: `num_envs` robots (LeggedBatchEnv)."""
+               threads: Optional[int] = None, privileged: bool = False, **render_kwargs):
+    """The batched legged env of `env_cfg`: `num_envs` robots (LeggedBatchEnv); privileged: it keeps what its
+    privileged observation reads (policy.critic_obs=privileged)."""
     from ppo_torchrl.tasks.locomotion.batch import LeggedBatchEnv
 
     kwargs = gym_make_kwargs(env_cfg, evaluation=evaluation)
     kwargs.pop("evaluation", None)
     return LeggedBatchEnv(kwargs, num_envs=num_envs, evaluation=evaluation, threads=threads,
-                          render_mode=render_mode, **render_kwargs)
+                          render_mode=render_mode, privileged=privileged, **render_kwargs)
 
 
 def make_rows(env_cfg, num_envs: int, train: bool = True, render_mode: Optional[str] = None, first_env=None,
-              threads: Optional[int] = None, **render_kwargs):
+              threads: Optional[int] = None, privileged: bool = False, **render_kwargs):
     """The rows of a training or evaluation env (env_rows.py): a batch for env=legged, views of one EnvPool for
     env=playground, else Gymnasium envs."""
     if batched(env_cfg):
         if first_env is not None:
             first_env.close()
-        return BatchRows(make_batch(env_cfg, num_envs, not train, render_mode, threads, **render_kwargs))
+        return BatchRows(make_batch(env_cfg, num_envs, not train, render_mode, threads, privileged, **render_kwargs))
     if env_cfg.get("playground") is not None:  # the num_envs envs: views of one EnvPool (envs_playground.py)
         from ppo_torchrl.envs_playground import PlaygroundRows
 
@@ -435,7 +436,7 @@ def make_torchrl_env(
     rows declare its layout (`privileged_layout()`, env_rows.py).
     """
     t = env_cfg.transforms
-    rows = make_rows(env_cfg, num_envs, train, render_mode, first_env, threads, **render_kwargs)
+    rows = make_rows(env_cfg, num_envs, train, render_mode, first_env, threads, privileged, **render_kwargs)
     if seed is not None:
         seed_rows(rows, seed)
     # The same envs the fast collector steps, wrapped (GymEnv(id, frame_skip=...) would take frame_skip as its own

@@ -127,8 +127,8 @@ def make_actor_critic(cfg, spec: EnvSpec, device: torch.device | str = "cpu") ->
     critic_key = CRITIC_INPUTS[cfg.get("critic_obs", "observation")]
     critic_dim = spec.obs_dim if critic_key == "observation" else spec.privileged_dim
     if critic_dim is None:
-        raise ConfigError("policy.critic_obs=privileged needs an env with a privileged observation (env=playground's "
-                          "tasks with a privileged_state, e.g. env.id=Go1JoystickFlatTerrain-v1); this env has none")
+        raise ConfigError("policy.critic_obs=privileged needs an env with a privileged observation (env=legged, or "
+                          "env=playground's tasks with a privileged_state, e.g. env.id=Go1JoystickFlatTerrain-v1); this env has none")
     hidden = [cfg.width] * len(cfg.hidden_sizes) if cfg.width else list(cfg.hidden_sizes)
     critic_hidden = [cfg.width] * len(cfg.critic_hidden_sizes) if cfg.width else list(cfg.critic_hidden_sizes)
     low = torch.as_tensor(spec.action_low)

@@ -140,8 +140,8 @@ def validate_config(cfg, keep_env: bool = False, build_env: bool = True):
     spec = env_spec(cfg.env, keep_env=keep_env)
     if cfg.policy.critic_obs == "privileged" and spec.privileged_dim is None:
         spec.close()
-        raise ConfigError(f"policy.critic_obs=privileged needs an env with a privileged observation (env=playground's "
-                          f"tasks with a privileged_state, e.g. env.id=Go1JoystickFlatTerrain-v1); env.id={cfg.env.id} "
+        raise ConfigError(f"policy.critic_obs=privileged needs an env with a privileged observation (env=legged, or "
+                          f"env=playground's tasks with a privileged_state, e.g. env.id=Go1JoystickFlatTerrain-v1); env.id={cfg.env.id} "
                           "has none")
     return spec
 

@@ -213,3 +213,64 @@ def test_a_joystick_runs_start_line_names_its_commands_not_a_step_and_a_target_s
     assert f"commands vx {-vx:+.2f} to {vx:+.2f} m/s" in line and "standing, drawn again every" in line, line
     climb = describe(robot, compose_config(["experiment=legged_trot_v2", f"env.xml_file={GO1}"]).env.legged)
     assert "recipe: step 10.7 cm (0.25 l), speed up to" in climb, climb
+
+
+def test_the_privileged_observation_is_the_noiseless_observation_then_what_the_simulator_knows():
+    """policy.critic_obs=privileged on env=legged: the critic's input is the observation before the randomization's
+    noise, the feet's contacts, their air times, the trunk's height and ground velocity, and the episode's world
+    draw, in the robot's units; the layout covers it; the actor's observation stays the noisy one."""
+    cfg = joystick("env.legged.randomize.push_speed=0.0")
+    batch = LeggedBatchEnv(gym_make_kwargs(cfg.env), num_envs=3, threads=1, privileged=True)
+    batch.reset(seed=11)
+    task, robot = batch.task, batch.world.robot
+    rng = np.random.default_rng(0)
+    for _ in range(15):
+        batch.step((0.3 * rng.standard_normal((3, 12))).clip(-1, 1).astype(np.float32))
+    p = batch.privileged()
+    assert p.shape == (3, task.privileged_dim) == (3, batch.privileged_layout().size)
+    clean = task.observe(batch.reading)
+    np.testing.assert_array_equal(p[:, :task.obs_dim], clean)
+    assert np.abs(batch.last_obs - clean).max() > 0  # the actor sees the noisy one (obs_noise 1.0 in the recipe)
+    feet = len(batch.world.feet)
+    rest = p[:, task.obs_dim:]
+    np.testing.assert_array_equal(rest[:, :feet], task.contacts.feet)
+    np.testing.assert_allclose(rest[:, feet:2 * feet], task.memory.air_time / robot.time_scale)
+    z = batch.reading.xpos[:, batch.world.trunk, 2]
+    np.testing.assert_allclose(rest[:, 2 * feet], z / robot.leg_length, rtol=1e-9)  # flat ground at 0
+    for i in range(3):
+        d = task.randomize.draws[i]
+        np.testing.assert_allclose(rest[i, -7:], [d["friction"], d["trunk_mass"], *np.array(d["com"]) / robot.leg_length,
+                                                  d["strength"], float(d["delayed"])])
+    assert len({tuple(r) for r in rest[:, -7:]}) == 3  # each row's own world
+    segments = [(s.name, s.treatment) for s in batch.privileged_layout().segments]
+    assert segments[-2:] == [("privileged_feet_down", "none"), ("privileged_state", "running")]
+    assert np.array_equal(batch.privileged(slice(1, 2)), p[1:2])
+    batch.close()
+
+
+def test_the_asymmetric_critic_on_a_legged_run_reads_the_privileged_observation_and_torchrls_path_is_refused():
+    import torch
+
+    from ppo_torchrl.collectors import make_collector
+    from ppo_torchrl.envs import env_spec
+    from ppo_torchrl.errors import ConfigError
+    from ppo_torchrl.layout import PRIVILEGED
+    from ppo_torchrl.models import make_actor_critic
+
+    tiny = ["collector.num_envs=2", "collector.frames_per_batch=64", "collector.physics_threads=1",
+            "policy.critic_obs=privileged"]
+    cfg = joystick(*tiny)
+    spec = env_spec(cfg.env)
+    ac = make_actor_critic(cfg.policy, spec)
+    assert ac.critic.in_keys == [PRIVILEGED] and spec.privileged_dim > spec.obs_dim
+    collector = make_collector(cfg, ac, 3, torch.device("cpu"))
+    try:
+        batch = collector.collect()
+        assert batch[PRIVILEGED].shape == (2, 32, spec.privileged_dim)
+        # the step's next privileged observation is the next step's, where no episode ended
+        same = ~batch["next", "done"][:, :-1, 0]
+        assert torch.equal(batch["next", PRIVILEGED][:, :-1][same], batch[PRIVILEGED][:, 1:][same])
+    finally:
+        collector.close()
+    with pytest.raises(ConfigError, match="collector.backend=torchrl writes no privileged"):
+        make_collector(joystick(*tiny, "collector.backend=torchrl"), ac, 3, torch.device("cpu"))

@@ -128,11 +128,13 @@ TINY_LEGGED = ["collector.frames_per_batch=256", "collector.total_frames=1024", 
 
 
 @pytest.mark.parametrize("scale", [["collector.num_envs=4"], ["collector.num_envs=4", "collector.backend=torchrl"],
-                                   ["collector.num_envs=2", "collector.workers=2"]],
-                         ids=["fast", "torchrl", "workers"])
+                                   ["collector.num_envs=2", "collector.workers=2"],
+                                   ["collector.num_envs=4", "policy.critic_obs=privileged"]],
+                         ids=["fast", "torchrl", "workers", "privileged"])
 def test_a_resume_collects_the_batch_the_uninterrupted_run_collects(scale):
     """Each row's position, the statistics and the exploration RNG come back from the collector's state: the batch
-    after a resume is the uninterrupted run's, on the fast path, TorchRL's Collector and worker processes."""
+    after a resume is the uninterrupted run's, on the fast path, TorchRL's Collector and worker processes, and with
+    the asymmetric critic's privileged observation (its statistics and the one the critic reads next)."""
     import torch
 
     from ppo_torchrl.collectors import make_collector

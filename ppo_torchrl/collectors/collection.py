@@ -52,7 +52,7 @@ BATCH_KEYS = ["observation", "action", ("next", "observation"), ("next", "reward
               ("next", "terminated"), ("next", "truncated")]
 PRIVILEGED_KEYS = [PRIVILEGED, ("next", PRIVILEGED)]  # policy.critic_obs=privileged: the critic's input
 # the collectors that write them (env_rows.py: how another env kind feeds the critic)
-PRIVILEGED_WRITERS = ("playground",)
+PRIVILEGED_WRITERS = ("fast", "playground")
 
 
 class Collection:

@@ -10,6 +10,11 @@ cost is close to the simulator's own. The batch has TorchRL's layout and keys, [
 `episode_reward` / `step_count` included (Gymnasium's RecordEpisodeStatistics, as EnvState writes them on
 TorchRL's path). Its state is TorchRL's (EnvState's snapshot in `env_state_dict`) and its own: the
 observation each env's policy acts on next and the exploration RNG, so a resumed run continues bit-exactly.
+
+policy.critic_obs=privileged (an env whose rows give a privileged observation: env=legged's batch): the rows'
+privileged observation goes through the env's `EnvState.privileged_norm` into the batch's `privileged_observation`
+and ("next", "privileged_observation"), the critic's input, as collectors/playground.py writes EnvPool's; the one
+the critic reads next is saved with the observation (`EnvState.emit`), so a resume stays bit-exact.
 """
 
 from __future__ import annotations
@@ -24,6 +29,7 @@ from torchrl.envs import EnvBase
 
 from ppo_torchrl.internals import OWN, keep_counters, worker_parts
 from ppo_torchrl.env_state import env_state_of, pack
+from ppo_torchrl.layout import PRIVILEGED
 from ppo_torchrl.models import NumpyPolicy
 
 
@@ -36,6 +42,8 @@ class FastCollector(Collector):
         env = create_env_fn if isinstance(create_env_fn, EnvBase) else create_env_fn(**(kwargs.pop("create_env_kwargs", None) or {}))
         self.env_state = env_state_of(env)  # TypeError for an env not of envs.make_torchrl_env
         self.obs_norm, self.reward_norm = self.env_state.obs_norm, self.env_state.reward_norm
+        self.privileged_norm = self.env_state.privileged_norm  # None unless the critic reads the privileged observation
+        self._privileged: Optional[np.ndarray] = None  # the normalized privileged observation each env is at
         # TorchRL's Collector resets the env once (its carrier), which this rollout does not use: the
         # statistics count each env's first observation when the first rollout acts on it.
         with self.env_state.uncounted():
@@ -64,8 +72,11 @@ class FastCollector(Collector):
     def _current_obs(self) -> np.ndarray:
         if self._obs is None:
             self._obs = self.obs_norm(self.env_state.rows.last_obs(), update=not self._counted)
+            if self.privileged_norm is not None:  # no TorchRL transform counts it on a reset: counted here, once
+                self._privileged = self.privileged_norm(self.env_state.rows.privileged(), update=True)
             self.env_state.stepped()  # acted on: a reset before this one stays counted
-            self.env_state.emit(self._obs)  # what EnvState saves as the observation each policy acts on next
+            # what EnvState saves as the observation each policy acts on next (and the critic's with it)
+            self.env_state.emit(self._obs, privileged=self._privileged)
         return self._obs
 
     @torch.no_grad()
@@ -90,8 +101,14 @@ class FastCollector(Collector):
         trunc_buf = np.zeros((steps, n), bool)
         rows = self.env_state.rows
         act, normalize, scale_rewards = policy.act, self.obs_norm, self.reward_norm
+        pnorm, privileged = self.privileged_norm, self._privileged
+        if pnorm is not None:
+            privileged_buf = np.empty((steps, n, privileged.shape[1]), np.float32)
+            privileged_next_buf = np.empty_like(privileged_buf)
         for t in range(steps):
             obs_buf[t] = obs
+            if pnorm is not None:
+                privileged_buf[t] = privileged
             traj_buf[t] = self._traj_ids
             act_buf[t], to_env = act(obs, noise[t])
             raw_next, reward, term_buf[t], trunc_buf[t] = rows.step(to_env)  # every row, none reset
@@ -101,16 +118,27 @@ class FastCollector(Collector):
             # observation (a final one too), then the reset observation where an episode ended.
             next_obs = normalize(raw_next)
             obs = next_obs
+            if pnorm is not None:
+                next_privileged = privileged = pnorm(rows.privileged())
             if reset_rows:
                 obs = next_obs.copy()
+                if pnorm is not None:
+                    privileged = next_privileged.copy()
                 for i in reset_rows:
                     obs[i] = normalize(rows.reset_row(i)[None])[0]
+                    if pnorm is not None:
+                        privileged[i] = pnorm(rows.privileged(slice(i, i + 1)))[0]
                     self._traj_ids[i] = self._traj_ids.max() + 1
             next_buf[t] = next_obs
+            if pnorm is not None:
+                privileged_next_buf[t] = next_privileged
             rew_buf[t] = scale_rewards(reward, term_buf[t] | trunc_buf[t])
-        self._obs = obs
-        self.env_state.emit(obs)
-        return self._fill(obs_buf, act_buf, traj_buf, next_buf, rew_buf, term_buf, trunc_buf, ep_return, ep_length)
+        self._obs, self._privileged = obs, privileged
+        self.env_state.emit(obs, privileged=privileged)
+        out = self._fill(obs_buf, act_buf, traj_buf, next_buf, rew_buf, term_buf, trunc_buf, ep_return, ep_length)
+        if pnorm is not None:
+            self._fill_privileged(out, privileged_buf, privileged_next_buf)
+        return out
 
     def _fill(self, obs_buf, act_buf, traj_buf, next_buf, rew_buf, term_buf, trunc_buf, ep_return, ep_length):
         """The batch in TorchRL's layout and keys, [num_envs, steps], from the rollout's [steps, num_envs] buffers,
@@ -142,6 +170,15 @@ class FastCollector(Collector):
                 self._out.get(key).copy_(value)
         return self._out
 
+    def _fill_privileged(self, out: TensorDict, privileged_buf: np.ndarray, privileged_next_buf: np.ndarray) -> None:
+        """The rollout's privileged observations ([steps, num_envs, P]) into the batch, [num_envs, steps, P]."""
+        for name, buf in ((PRIVILEGED, privileged_buf), (("next", PRIVILEGED), privileged_next_buf)):
+            value = torch.from_numpy(np.ascontiguousarray(np.swapaxes(buf, 0, 1))).to(self.storing_device)
+            if name in out.keys(True):
+                out.get(name).copy_(value)
+            else:
+                out.set(name, value)
+
     def state_dict(self):
         """TorchRL's (the env's EnvState: statistics, episodes, positions, the observation each env's policy acts
         on next) and this collector's own ("fast": the exploration RNG), packed in one entry
@@ -161,4 +198,5 @@ class FastCollector(Collector):
         super().load_state_dict(keep_counters(self, state), **kwargs)
         if own is not None and self.env_state.continue_episodes(now=True):
             self._obs = np.asarray(self.env_state.acted_on(), np.float32).reshape(self.num_envs, -1).copy()
+            self._privileged = self.env_state.privileged_acted_on()
             self.rng.bit_generator.state = own["rng"]

@@ -26,7 +26,6 @@ import torch
 from ppo_torchrl.collectors.fast import FastCollector
 from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.internals import OWN, worker_parts
-from ppo_torchrl.layout import PRIVILEGED
 
 RESUME_LIMIT = ("env=playground cannot restore EnvPool's simulator state: the statistics, RNG and frame count carry "
                 "on, each env starts a new episode")
@@ -65,8 +64,6 @@ class PlaygroundCollector(FastCollector):
     def __init__(self, create_env_fn, policy=None, **kwargs):
         super().__init__(create_env_fn, policy, **kwargs)
         self.shared = self.env_state.gym_envs[0].unwrapped.shared
-        self.privileged_norm = self.env_state.privileged_norm
-        self._privileged = None  # the normalized privileged observation each env is at (with privileged_norm)
         self._new_episodes = False  # a resume: the next rollout rebuilds the pool from self.rng
         # each env's episode so far: return and length (Gymnasium's counters, kept here), each reward term's sum, and
         # the sums of the commanded speed and |yaw rate| (envs_playground.PlaygroundPool.command_figures)
@@ -95,7 +92,7 @@ class PlaygroundCollector(FastCollector):
             if self.privileged_norm is not None:  # no TorchRL transform counts it on a reset: counted here, once
                 self._privileged = self.privileged_norm(self.shared.current[privileged_key], update=True)
             self.env_state.stepped()
-            self.env_state.emit(self._obs)
+            self.env_state.emit(self._obs, privileged=self._privileged)
         return self._obs
 
     @torch.no_grad()
@@ -162,15 +159,10 @@ class PlaygroundCollector(FastCollector):
                 privileged_next_buf[t] = next_privileged
             rew_buf[t] = scale_rewards(reward, done)
         self._obs, self._privileged = obs, privileged
-        self.env_state.emit(obs)
+        self.env_state.emit(obs, privileged=privileged)
         out = self._fill(obs_buf, act_buf, traj_buf, next_buf, rew_buf, term_buf, trunc_buf, ep_return, ep_length)
         if pnorm is not None:
-            for name, buf in ((PRIVILEGED, privileged_buf), (("next", PRIVILEGED), privileged_next_buf)):
-                value = torch.from_numpy(np.ascontiguousarray(np.swapaxes(buf, 0, 1))).to(self.storing_device)
-                if name in out.keys(True):
-                    out.get(name).copy_(value)
-                else:
-                    out.set(name, value)
+            self._fill_privileged(out, privileged_buf, privileged_next_buf)
         return out
 
     def load_state_dict(self, state_dict, **kwargs) -> None:

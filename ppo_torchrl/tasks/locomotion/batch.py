@@ -46,7 +46,7 @@ class LeggedBatchEnv(gym.vector.VectorEnv):
     metadata = {"autoreset_mode": gym.vector.AutoresetMode.DISABLED, "render_modes": ["rgb_array"]}
 
     def __init__(self, kwargs: dict, num_envs: int = 1, evaluation: bool = False, threads: Optional[int] = None,
-                 render_mode: Optional[str] = None, width: int = 640, height: int = 480, **_):
+                 render_mode: Optional[str] = None, width: int = 640, height: int = 480, privileged: bool = False, **_):
         kwargs = dict(kwargs)
         self.max_steps = int(kwargs.pop("max_episode_steps", None) or DEFAULT_MAX_STEPS)
         self.world = world = build_world(kwargs, render=render_mode is not None)
@@ -57,7 +57,8 @@ class LeggedBatchEnv(gym.vector.VectorEnv):
             d.qpos[:] = world.init_qpos
             mujoco.mj_kinematics(world.model, d)
         self.rngs = [seeding.np_random()[0] for _ in range(n)]
-        self.task = task = LeggedTask(n, world, kwargs, evaluation)
+        # privileged: the critic's observation is asked for (policy.critic_obs=privileged): the feet's contacts are kept
+        self.task = task = LeggedTask(n, world, kwargs, evaluation, privileged)
         self.noise = task.noise
         model = world.model
         self.reading = Reading(qpos=np.zeros((n, model.nq)), qvel=np.zeros((n, model.nv)),
@@ -266,6 +267,14 @@ class LeggedBatchEnv(gym.vector.VectorEnv):
 
     def observation_layout(self):
         return self.task.layout()
+
+    def privileged_layout(self):
+        """The privileged observation's layout (task.py): what policy.critic_obs=privileged gives the critic."""
+        return self.task.privileged_layout()
+
+    def privileged(self, rows=slice(None)) -> np.ndarray:
+        """Rows `rows`' privileged observation now: after a step (the next one of each row) or a row's reset."""
+        return self.task.privileged(self.reading, rows)
 
     @property
     def dt(self) -> float:

@@ -7,6 +7,13 @@ The observation: Gymnasium Ant-v5's (the trunk's height and attitude, the joint 
 clipped contact forces where asked), then the opt-in extras: a 0/1 contact flag per foot, terrain heights at
 points ahead of the trunk along the heading (relative to the trunk with env.legged.obs_layout=segments), the
 command's segment, the trot clock's sin and cos. `layout()` says how each segment is scaled (layout.py).
+
+The privileged observation (policy.critic_obs=privileged: the asymmetric critic's input, never the actor's): the
+observation as it is, before the randomization's noise, then what a robot cannot sense but the simulator knows,
+each in the robot's units: a 0/1 flag per foot on the ground, each foot's time off it (sqrt(l / g)), the trunk's
+height over the ground under it (l), its ground velocity in its heading frame (sqrt(g l)) and yaw rate
+(sqrt(g / l)), and the episode's world (randomize.py's draw: friction, trunk mass, its centre's offset in l,
+motor strength, a one-step delay). MuJoCo Playground's `privileged_state` holds the same kinds of figure.
 """
 
 from __future__ import annotations
@@ -45,8 +52,12 @@ class Reading:
     step_peak: Optional[np.ndarray]
 
 
+WORLD_DRAW = ("friction", "trunk_mass", "com", "strength", "delayed")  # the privileged observation's world, in order
+NOMINAL_DRAW = {"friction": 1.0, "trunk_mass": 1.0, "com": [0.0, 0.0, 0.0], "strength": 1.0, "delayed": False}
+
+
 class LeggedTask:
-    def __init__(self, n: int, world, kwargs: dict, evaluation: bool):
+    def __init__(self, n: int, world, kwargs: dict, evaluation: bool, privileged: bool = False):
         legged, terrain = dict(kwargs.get("legged") or {}), dict(kwargs.get("terrain") or {})
         self.n, self.world = n, world
         self.terrain = make_terrain(n, world, terrain, evaluation)
@@ -77,7 +88,7 @@ class LeggedTask:
             self._first_half = np.array([c in first for c in world.corners])  # down in the first half: LF, RH
         if weights["joint_speed_limit"] and legged.get("joint_speed_limit") is None:
             raise ConfigError("env.locomotion.joint_speed_limit_cost_weight needs env.locomotion.joint_speed_limit")
-        self.needs_contacts = self.observe_contacts or "contacts" in needs
+        self.needs_contacts = self.observe_contacts or "contacts" in needs or privileged  # (privileged: its feet)
         self.needs_peak = "peak" in needs
         self.needs_cfrc = "cfrc" in needs or bool(kwargs.get("include_cfrc_ext_in_observation"))
         self.include_cfrc = bool(kwargs.get("include_cfrc_ext_in_observation"))
@@ -108,6 +119,7 @@ class LeggedTask:
         nq, nv = model.nq, model.nv
         self.obs_dim = (nq - 2 + nv + (model.nbody - 1) * 6 * self.include_cfrc + len(world.feet) * self.observe_contacts
                         + self.height_samples + self.command.size + 2 * (self.period is not None))
+        self.privileged_dim = self.obs_dim + 2 * len(world.feet) + 1 + 3 + 7
 
     # ---------------------------------------------------------------- the clock
     def clock_phase(self) -> Optional[np.ndarray]:
@@ -151,6 +163,28 @@ class LeggedTask:
                  Segment.none("command", self.command.size),
                  Segment.none("clock", clock))
         return ObservationLayout(tuple(p for p in parts if p.size))
+
+    def privileged(self, r: Reading, rows=slice(None)) -> np.ndarray:
+        """The privileged observation of rows `rows` (module doc), from their reading; its contact flags and air
+        times are those of the last control step (the task must be built with privileged=True to keep them)."""
+        w, m = self.world, self.memory
+        speed, time = w.units
+        length = speed * time  # l (1 m for a model without a robot read from it)
+        trunk = r.xpos[rows, w.trunk]
+        height = (trunk[:, 2] - ground_under(self.terrain, rows, trunk[:, :2])) / length
+        motion = self.motion(r)
+        draws = [{**NOMINAL_DRAW, **self.randomize.draws[i]} for i in np.arange(self.n)[rows]]
+        world_draw = np.array([[d["friction"], d["trunk_mass"], *np.asarray(d["com"]) / length,
+                                d["strength"], float(d["delayed"])] for d in draws], np.float64).reshape(-1, 7)
+        return np.concatenate([self.observe(r, rows), self.contacts.feet[rows].astype(np.float64),
+                               m.air_time[rows] / time, height[:, None], motion["velocity"][rows] / speed,
+                               (motion["yaw_rate"][rows] * time)[:, None], world_draw], axis=1)
+
+    def privileged_layout(self) -> ObservationLayout:
+        """The observation's own segments, then the feet's flags as they are and the rest running (module doc)."""
+        feet = len(self.world.feet)
+        return ObservationLayout(self.layout().segments + (Segment.none("privileged_feet_down", feet),
+                                                           Segment.running("privileged_state", feet + 1 + 3 + 7)))
 
     # ---------------------------------------------------------------- one control step
     def step(self, actions: np.ndarray, r: Reading, xy_before: np.ndarray, rngs: list) -> tuple:
