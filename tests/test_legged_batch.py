@@ -1,125 +1,122 @@
-"""The batched legged env (issue 72) against the locomotion env it replaces for env=legged (robots/env.py, Ant-v5's
-class with its mixins): the same model, and from the same state under the same actions the same physics states
-bit for bit, the observations and every reward term to float tolerance, the same episode ends and resets, over
-2,000 control steps on two robots; N rows are N such envs, whatever the number of physics threads; a resumed run
-logs what the uninterrupted one would.
+"""The batched legged env (issue 72) against the locomotion env it replaced (robots/env.py, Ant-v5's class with its
+mixins), through that env's recorded trajectories (tests/legged_reference.py; tests/data/): the same model, and from
+the same state under the same actions the same physics states bit for bit, the rewards, every reward term's sum and
+the observations to float tolerance, the same episode ends and why, over 2,000 control steps on two robots and 600 on
+three more recipes; N rows are N one-row batches, whatever the number of physics threads; a resumed run logs what
+the uninterrupted one would.
 """
+
+import json
 
 import numpy as np
 import pytest
 
-from ppo_torchrl.envs import gym_make_kwargs, make_gym_env
+from ppo_torchrl.envs import gym_make_kwargs
 from ppo_torchrl.tasks.locomotion.batch import LeggedBatchEnv
 
 from conftest import compose_config
+from legged_reference import CASES, DATA, EVERY, MODELS, actions, model_digests, physics_digest
 
 GO1, ANYMAL = "menagerie/unitree_go1/scene.xml", "menagerie/anybotics_anymal_b/scene.xml"
-EVERY_TERM = ["env.legged.stumble_cost_weight=2.0", "env.locomotion.feet_air_time_weight=0.3",
-              "env.locomotion.joint_speed_limit=20.0", "env.locomotion.joint_speed_limit_cost_weight=0.05",
-              "env.locomotion.torque_limit=30.0"]
+REFERENCE = np.load(DATA)
 
 
 def legged_config(xml: str, *overrides, recipe: str = "legged_trot_v2"):
     return compose_config([f"experiment={recipe}", f"env.xml_file={xml}", *overrides])
 
 
-def lockstep(cfg, steps: int, seed: int = 5, scale: float = 0.3) -> dict:
-    """Steps the old env and a one-row batch with the same actions; the largest difference of each figure."""
-    old = make_gym_env(cfg.env)
-    new = LeggedBatchEnv(gym_make_kwargs(cfg.env), num_envs=1, threads=1)
-    o_obs, _ = old.reset(seed=seed)
-    n_obs, _ = new.reset(seed=[seed])
-    worst = {"obs": float(np.abs(o_obs - n_obs[0]).max()), "reward": 0.0, "resets": 0}
-    rng = np.random.default_rng(seed)
-    nu = new.world.model.nu
-    for t in range(steps):
-        action = (scale * rng.standard_normal(nu)).clip(-1, 1).astype(np.float32)
-        o, r, term, trunc, info = old.step(action)
-        n, nr, nterm, ntrunc, _ = new.step(action[None])
-        od, nd = old.unwrapped.data, new.datas[0]
-        assert np.array_equal(od.qpos, nd.qpos) and np.array_equal(od.qvel, nd.qvel), f"physics differ at step {t}"
-        assert (term, trunc) == (bool(nterm[0]), bool(ntrunc[0])), f"episode ends differ at step {t}"
-        worst["obs"] = max(worst["obs"], float(np.abs(o - n[0]).max()))
-        worst["reward"] = max(worst["reward"], abs(r - float(nr[0])))
-        for k, name in enumerate(new.task.names):
-            key = f"reward_{name}"
-            assert key in info, f"{key}: the old env has no such term"
-            worst[key] = max(worst.get(key, 0.0), abs(info[key] - new.task.last_terms[0, k]))
-        if term or trunc:
-            assert info["termination"] == new.task.termination(0)
-            worst["resets"] += 1
-            o, _ = old.reset()
-            n, _ = new.reset(options={"reset_mask": np.array([True])})
-            assert np.array_equal(o, n[0]), f"the reset after step {t} differs"
-    old.close()
-    new.close()
-    return worst
+def replay(case: str) -> set:
+    """Steps a one-row batch as the old env was stepped in `case` and compares every step with its record; the
+    names of the batch's reward terms."""
+    overrides, steps, seed = CASES[case]
+    ref = {key.split("/", 1)[1]: REFERENCE[key] for key in REFERENCE.files if key.startswith(case + "/")}
+    batch = LeggedBatchEnv(gym_make_kwargs(compose_config(overrides).env), num_envs=1, threads=1)
+    obs, _ = batch.reset(seed=[seed])
+    np.testing.assert_allclose(obs[0], ref["obs"][0], rtol=0, atol=1e-12)
+    sums = np.zeros(len(batch.task.names))
+    ended, why, resets, kept = [], [], 0, 1
+    for t, action in enumerate(actions(seed, steps, batch.world.model.nu)):
+        obs, reward, term, trunc, _ = batch.step(action[None])
+        assert physics_digest(batch.datas[0]) == ref["digest"][t], f"{case}: the physics differ at step {t}"
+        assert abs(float(reward[0]) - ref["reward"][t]) < 1e-7, f"{case}: the reward differs at step {t}"
+        assert abs(obs[0].sum() - ref["obs_sum"][t]) < 1e-9 * max(1.0, abs(ref["obs_sum"][t]))
+        sums += batch.task.last_terms[0]
+        if (t + 1) % EVERY == 0:
+            np.testing.assert_allclose(obs[0], ref["obs"][kept], rtol=0, atol=1e-12)
+            kept += 1
+        if term[0] or trunc[0]:
+            ended.append([t, int(term[0]), int(trunc[0])])
+            why.append(str(batch.task.termination(0)))
+            obs, _ = batch.reset(options={"reset_mask": np.array([True])})
+            assert physics_digest(batch.datas[0]) == ref["reset_digest"][resets], f"{case}: the reset after {t} differs"
+            assert abs(obs[0].sum() - ref["reset_obs_sum"][resets]) < 1e-9 * max(1.0, abs(ref["reset_obs_sum"][resets]))
+            resets += 1
+    batch.close()
+    assert ended == ref["ended"].tolist() and why == ref["why"].tolist()
+    assert sorted(batch.task.names) == ref["terms"].tolist()
+    recorded = dict(zip(ref["terms"].tolist(), ref["term_sums"]))
+    for name, total in zip(batch.task.names, sums):
+        assert abs(total - recorded[name]) < 1e-6 * max(1.0, abs(recorded[name])), name
+    return set(batch.task.names), resets
 
 
-def assert_close(worst: dict, terms: set) -> None:
-    assert worst["obs"] == 0.0  # the observation is computed from the same floats in the same order
-    assert worst["reward"] < 1e-7  # the control cost: float64 here, float32 there (NumPy 2's promotion), ~3e-9
-    assert {k[len("reward_"):] for k in worst if k.startswith("reward_")} == terms
-    assert all(worst[k] < 1e-7 for k in worst if k.startswith("reward_"))
-
-
-def test_the_batch_compiles_the_model_the_old_env_steps():
-    cfg = legged_config(GO1)
-    old, new = make_gym_env(cfg.env).unwrapped.model, LeggedBatchEnv(gym_make_kwargs(cfg.env)).models[0]
-    fields = [f for f in dir(old) if not f.startswith("_") and isinstance(getattr(old, f, None), np.ndarray)]
-    assert len(fields) > 100
-    assert [f for f in fields if not np.array_equal(getattr(old, f), getattr(new, f), equal_nan=True)] == []
+def test_the_batch_compiles_the_model_the_old_env_stepped():
+    recorded = json.loads(MODELS.read_text())["go1"]
+    new = model_digests(LeggedBatchEnv(gym_make_kwargs(legged_config(GO1).env)).models[0])
+    assert len(recorded) > 100 and set(new) == set(recorded)
+    assert [f for f in recorded if new[f] != recorded[f]] == []
 
 
 V2_TERMS = {"forward", "survive", "ctrl", "contact", "torque", "joint_speed", "action_rate", "base_height",
             "orientation", "foot_slip", "body_contact", "long_swing", "gait_clock"}
 
 
-@pytest.mark.parametrize("xml", [GO1, ANYMAL], ids=["go1", "anymal_b"])
-def test_two_thousand_steps_match_the_old_env_exactly(xml):
-    worst = lockstep(legged_config(xml), 2000)
-    assert_close(worst, V2_TERMS)
-    assert worst["resets"] >= 2  # the episode ends and the resets were compared too
+@pytest.mark.parametrize("case", ["go1", "anymal_b"])
+def test_two_thousand_steps_match_the_old_env_exactly(case):
+    terms, resets = replay(case)
+    assert terms == V2_TERMS
+    assert resets >= 2  # the episode ends and the resets were compared too
 
 
 def test_every_reward_term_and_issue_46s_recipe_match():
-    worst = lockstep(legged_config(GO1, *EVERY_TERM), 600, seed=3)
-    assert_close(worst, V2_TERMS | {"stumble", "air_time", "joint_speed_limit"})
-    worst = lockstep(legged_config(ANYMAL, recipe="legged_trot"), 600, seed=4)  # every contact, the model's step
-    assert_close(worst, V2_TERMS - {"long_swing"})
+    assert replay("go1_every_term")[0] == V2_TERMS | {"stumble", "air_time", "joint_speed_limit"}
+    assert replay("anymal_b_issue46")[0] == V2_TERMS - {"long_swing"}  # every contact, the model's step
 
 
 def test_the_in_house_quadruped_presets_match_too():
     """env=mjcf's robots (the model as it is, the action its controls): the zoo's climbing quadruped's recipe."""
-    worst = lockstep(compose_config(["experiment=quadruped_climb"]), 600, seed=2)
-    assert_close(worst, {"forward", "survive", "ctrl", "contact", "torque", "joint_speed", "joint_speed_limit",
-                         "action_rate", "base_height", "orientation", "foot_slip", "air_time", "body_contact"})
+    assert replay("quadruped_climb")[0] == {"forward", "survive", "ctrl", "contact", "torque", "joint_speed",
+                                            "joint_speed_limit", "action_rate", "base_height", "orientation",
+                                            "foot_slip", "air_time", "body_contact"}
 
 
 def test_n_rows_are_n_envs_whatever_the_threads():
     cfg = legged_config(GO1)
-    olds = [make_gym_env(cfg.env) for _ in range(3)]
-    for i, env in enumerate(olds):
-        env.reset(seed=20 + i)
+    singles = [LeggedBatchEnv(gym_make_kwargs(cfg.env), num_envs=1, threads=1) for _ in range(3)]
+    for i, env in enumerate(singles):
+        env.reset(seed=[20 + i])
     batches = [LeggedBatchEnv(gym_make_kwargs(cfg.env), num_envs=3, threads=threads) for threads in (1, 2)]
     for batch in batches:
         batch.reset(seed=20)
     rng = np.random.default_rng(1)
+    ends = 0
     for t in range(300):
-        actions = (0.4 * rng.standard_normal((3, 12))).clip(-1, 1).astype(np.float32)
-        results = [env.step(a) for env, a in zip(olds, actions)]
+        actions_now = (0.4 * rng.standard_normal((3, 12))).clip(-1, 1).astype(np.float32)
+        results = [env.step(a[None]) for env, a in zip(singles, actions_now)]
         for batch in batches:
-            obs, reward, term, trunc, _ = batch.step(actions)
+            obs, reward, term, trunc, _ = batch.step(actions_now)
             for i, (o, r, te, tr, _) in enumerate(results):
-                assert np.array_equal(olds[i].unwrapped.data.qpos, batch.datas[i].qpos)
-                np.testing.assert_allclose(obs[i], o, rtol=0, atol=1e-12)
-                assert abs(reward[i] - r) < 1e-7 and (te, tr) == (term[i], trunc[i])
+                assert np.array_equal(singles[i].datas[0].qpos, batch.datas[i].qpos)
+                np.testing.assert_allclose(obs[i], o[0], rtol=0, atol=1e-12)
+                assert abs(reward[i] - r[0]) < 1e-7 and (te[0], tr[0]) == (term[i], trunc[i])
             done = term | trunc
             if done.any():
                 batch.reset(options={"reset_mask": done})
+        ends += sum(bool(te[0] or tr[0]) for _, _, te, tr, _ in results)
         for i, (_, _, te, tr, _) in enumerate(results):
-            if te or tr:
-                olds[i].reset()
+            if te[0] or tr[0]:
+                singles[i].reset(options={"reset_mask": np.array([True])})
+    assert ends >= 1  # a row's own reset, in the middle of the others' episodes, was compared too
 
 
 TINY_LEGGED = ["collector.frames_per_batch=256", "collector.total_frames=1024", "loss.epochs=1",
