@@ -69,24 +69,26 @@ def test_each_robot_stands_for_two_seconds_at_its_derived_pose_under_its_derived
     within 20% of its standing height and tilts under 30 degrees, with only its feet (and A1's calves,
     Menagerie's geometry) on the floor."""
     from ppo_torchrl.compose import compose
-    from ppo_torchrl.envs import make_gym_env
+    from ppo_torchrl.envs import make_batch
 
     cfg = compose(["env=legged", f"env.xml_file={scene(folder)}", "env.locomotion.reset_noise_scale=0"])
-    env = make_gym_env(cfg.env)
-    robot = env.unwrapped
-    robot.reset(seed=0)
-    start = float(robot.data.qpos[2])
+    batch = make_batch(cfg.env, 1, threads=1)
+    batch.reset(seed=0)
+    data, w = batch.datas[0], batch.world
+    start = float(data.qpos[2])
     heights, tilts = [], []
-    for _ in range(int(round(2.0 / robot.dt))):
-        _, _, terminated, _, _ = robot.step(np.zeros(robot.model.nu))
-        assert not terminated
-        heights.append(robot.data.qpos[2])
-        tilts.append(math.degrees(math.acos(min(1.0, robot.data.xmat[robot._body_id][8]))))
+    for _ in range(int(round(2.0 / batch.dt))):
+        _, _, terminated, _, _ = batch.step(np.zeros((1, w.model.nu)))
+        assert not terminated[0]
+        heights.append(data.qpos[2])
+        tilts.append(math.degrees(math.acos(min(1.0, data.xmat[w.trunk][8]))))
     assert start == pytest.approx(FACTS[folder][2], abs=1e-3)
     assert max(abs(h - start) for h in heights) <= 0.2 * start
     assert max(tilts) < 30.0
-    assert robot.feet_on_ground().all()
-    env.close()
+    feet = type(batch.task.contacts)(1, w)
+    feet.read(0, data)
+    assert feet.feet[0].all()
+    batch.close()
 
 
 def test_a_full_action_moves_a_joint_no_further_than_its_servo_saturates():
@@ -94,16 +96,16 @@ def test_a_full_action_moves_a_joint_no_further_than_its_servo_saturates():
     the model) gets that angle: Go1 23.7 / 100 (hips) and 35.55 / 100 (knees), ANYmal B 40 / 100, Go2's torque
     motors their derived PD's 0.3 rad."""
     from ppo_torchrl.compose import compose
-    from ppo_torchrl.envs import make_gym_env
+    from ppo_torchrl.envs import make_batch
 
     expected = {"unitree_go1": [0.237, 0.237, 0.3555] * 4, "anybotics_anymal_b": [0.4] * 12, "unitree_go2": [0.3] * 12}
     for folder, scales in expected.items():
-        robot = make_gym_env(compose(["env=legged", f"env.xml_file={scene(folder)}"]).env).unwrapped
-        assert robot._ctrl_per_action == pytest.approx(scales), folder
-        assert (robot.ctrl_of(np.ones(12)) - robot.ctrl_of(np.zeros(12)) <= np.array(scales) + 1e-9).all()
-    robot = make_gym_env(compose(["env=legged", f"env.xml_file={scene('unitree_go1')}",
-                                  "env.legged.action_scale=0.1"]).env).unwrapped
-    assert robot._ctrl_per_action == pytest.approx([0.1] * 12)  # the most, where the servos saturate later
+        world = make_batch(compose(["env=legged", f"env.xml_file={scene(folder)}"]).env).world
+        assert world.ctrl_per_action == pytest.approx(scales), folder
+        assert (world.ctrl_of(np.ones(12)) - world.ctrl_of(np.zeros(12)) <= np.array(scales) + 1e-9).all()
+    world = make_batch(compose(["env=legged", f"env.xml_file={scene('unitree_go1')}",
+                                "env.legged.action_scale=0.1"]).env).world
+    assert world.ctrl_per_action == pytest.approx([0.1] * 12)  # the most, where the servos saturate later
 
 
 def test_the_legged_recipe_moves_every_joint_by_the_action_scale_and_explores_gently():
@@ -113,18 +115,18 @@ def test_the_legged_recipe_moves_every_joint_by_the_action_scale_and_explores_ge
     from omegaconf import OmegaConf
 
     from ppo_torchrl.compose import compose
-    from ppo_torchrl.envs import make_gym_env
+    from ppo_torchrl.envs import make_batch
     from ppo_torchrl.robots.model import read_robot
     from ppo_torchrl.robots.recipe import describe
 
     cfg = compose(["experiment=legged_trot", f"env.xml_file={scene('unitree_go1')}"])
-    robot = make_gym_env(cfg.env).unwrapped
-    assert robot._ctrl_per_action == pytest.approx([0.5] * 12)
+    world = make_batch(cfg.env).world
+    assert world.ctrl_per_action == pytest.approx([0.5] * 12)
     assert "actions move joints up to 0.50 rad" in describe(read_robot(scene("unitree_go1")), cfg.env.legged)
-    assert robot.ctrl_of(np.ones(12))[2] - robot.ctrl_of(np.zeros(12))[2] == pytest.approx(0.5)
+    assert world.ctrl_of(np.ones(12))[2] - world.ctrl_of(np.zeros(12))[2] == pytest.approx(0.5)
     saved = OmegaConf.create(OmegaConf.to_container(cfg))  # as a run dir's config.yaml is read back
     del saved.env.legged["saturation_cap"]  # saved before the key existed: the cap it trained under
-    assert make_gym_env(saved.env).unwrapped._ctrl_per_action == pytest.approx([0.237, 0.237, 0.3555] * 4)
+    assert make_batch(saved.env).world.ctrl_per_action == pytest.approx([0.237, 0.237, 0.3555] * 4)
     assert math.exp(cfg.policy.log_std_init) + cfg.policy.std_min == pytest.approx(0.4, abs=0.002)
     assert OmegaConf.select(cfg, "env.terrain.flat_share") == 0.2
 
@@ -133,17 +135,18 @@ def test_eval_measures_joint_torque_against_the_models_own_limits():
     """Standing (action 0) a Go1's servos hold well under their force range; driven to the ends of the action
     range they saturate: the peak share reaches 1.0 (the model's limit, not more) and the time at it shows."""
     from ppo_torchrl.compose import compose
-    from ppo_torchrl.envs import make_gym_env
+    from ppo_torchrl.envs import make_batch
+    from ppo_torchrl.tasks.locomotion.evaluation import GaitBatch
 
     cfg = compose(["env=legged", f"env.xml_file={scene('unitree_go1')}", "env.locomotion.reset_noise_scale=0"])
-    robot = make_gym_env(cfg.env).unwrapped
-    robot.measure_gait = True
+    batch = make_batch(cfg.env, 1, evaluation=True, threads=1)
+    batch.gait = GaitBatch(1, batch.world, None)  # the gait figures, sampled at every physics step
     figures = {}
-    for name, action in (("standing", np.zeros(robot.model.nu)), ("driven", np.tile([1.0, -1.0, 1.0], 4))):
-        robot.reset(seed=0)
-        for _ in range(int(round(0.5 / robot.dt))):
-            robot.step(action)
-        figures[name] = robot.gait_summary()
+    for name, action in (("standing", np.zeros(12)), ("driven", np.tile([1.0, -1.0, 1.0], 4))):
+        batch.reset(seed=0)
+        for _ in range(int(round(0.5 / batch.dt))):
+            batch.step(action[None])
+        figures[name] = batch.gait.meters[0].summary()
     assert 0.0 < figures["standing"]["peak_torque_share"] < 0.9
     assert figures["standing"]["torque_at_limit_share"] == 0.0
     assert figures["driven"]["peak_torque_share"] == pytest.approx(1.0, abs=1e-6)
@@ -155,24 +158,24 @@ def test_the_robustness_worlds_halve_every_contacts_grip_and_weigh_the_trunk_dow
     grip halves: halving the floor alone would leave a Go1's feet at 0.6 of 1.0); trunk_mass_scale=1.1: the trunk
     10% heavier, inertia too; a heavier trunk settles lower standing. The model file is not touched."""
     from ppo_torchrl.compose import compose
-    from ppo_torchrl.envs import make_gym_env
+    from ppo_torchrl.envs import make_batch
 
     text = scene("unitree_go1").parent.joinpath("go1.xml").read_text()
     envs = {}
     for name, extra in (("plain", []), ("world", ["env.legged.friction_scale=0.5", "env.legged.trunk_mass_scale=1.1"])):
         cfg = compose(["env=legged", f"env.xml_file={scene('unitree_go1')}", "env.locomotion.reset_noise_scale=0", *extra])
-        envs[name] = make_gym_env(cfg.env).unwrapped
-    plain, world = envs["plain"], envs["world"]
-    assert np.allclose(world.model.geom_friction, 0.5 * plain.model.geom_friction)
-    trunk = plain._body_id
-    assert world.model.body_mass[trunk] == pytest.approx(1.1 * plain.model.body_mass[trunk])
-    assert np.allclose(world.model.body_inertia[trunk], 1.1 * plain.model.body_inertia[trunk])
+        envs[name] = make_batch(cfg.env, 1, threads=1)
+    plain, world = envs["plain"].models[0], envs["world"].models[0]
+    assert np.allclose(world.geom_friction, 0.5 * plain.geom_friction)
+    trunk = envs["plain"].world.trunk
+    assert world.body_mass[trunk] == pytest.approx(1.1 * plain.body_mass[trunk])
+    assert np.allclose(world.body_inertia[trunk], 1.1 * plain.body_inertia[trunk])
     heights = {}
-    for name, env in envs.items():
-        env.reset(seed=0)
-        for _ in range(int(round(1.0 / env.dt))):
-            env.step(np.zeros(env.model.nu))
-        heights[name] = float(env.data.xpos[trunk][2])
+    for name, batch in envs.items():
+        batch.reset(seed=0)
+        for _ in range(int(round(1.0 / batch.dt))):
+            batch.step(np.zeros((1, 12)))
+        heights[name] = float(batch.datas[0].xpos[trunk][2])
     assert heights["world"] < heights["plain"]
     assert scene("unitree_go1").parent.joinpath("go1.xml").read_text() == text
     with pytest.raises(ConfigError, match="friction_scale=0.0 must be > 0"):
@@ -190,33 +193,38 @@ def test_torque_motors_become_pd_servos_around_the_standing_pose_with_gains_from
     assert robot.kp[2] == pytest.approx(45.43 / PD_SATURATION_RAD)
     assert all(kd > 0 for kd in robot.kd)
     from ppo_torchrl.compose import compose
-    from ppo_torchrl.envs import make_gym_env
+    from ppo_torchrl.envs import make_batch
 
-    env = make_gym_env(compose(["env=legged", f"env.xml_file={scene('unitree_go2')}"]).env).unwrapped
-    env.reset(seed=0)
+    batch = make_batch(compose(["env=legged", f"env.xml_file={scene('unitree_go2')}"]).env)
+    batch.reset(seed=0)
+    model, world = batch.models[0], batch.world
     a = 2  # a knee: a position actuator around its standing angle, limited to the motor's torque
-    assert env.model.actuator_biastype[a] == mujoco.mjtBias.mjBIAS_AFFINE
-    assert env.model.actuator_forcerange[a].tolist() == pytest.approx([-45.43, 45.43])
-    assert env.ctrl_of(np.zeros(12))[a] == pytest.approx(-1.8)
-    assert env.ctrl_of(np.ones(12))[a] == pytest.approx(-1.8 + PD_SATURATION_RAD)  # a full action: where it saturates
+    assert model.actuator_biastype[a] == mujoco.mjtBias.mjBIAS_AFFINE
+    assert model.actuator_forcerange[a].tolist() == pytest.approx([-45.43, 45.43])
+    assert world.ctrl_of(np.zeros(12))[a] == pytest.approx(-1.8)
+    assert world.ctrl_of(np.ones(12))[a] == pytest.approx(-1.8 + PD_SATURATION_RAD)  # a full action: where it saturates
 
 
 def test_the_step_is_added_to_a_model_that_has_none_at_a_quarter_leg_length_and_faces_the_heading():
     """ANYmal B faces -x: its step (0.25 l = 14.7 cm in evaluation) lies ahead of it, made by MjSpec at build
     time; the model file is not touched."""
     from ppo_torchrl.compose import compose
-    from ppo_torchrl.envs import make_gym_env
+    from ppo_torchrl.envs import make_batch
 
     before = scene("anybotics_anymal_b").read_bytes(), (ROBOTS_DIR / "anybotics_anymal_b" / "anymal_b.xml").read_bytes()
     cfg = compose(["env=legged", f"env.xml_file={scene('anybotics_anymal_b')}"])
-    env = make_gym_env(cfg.env, evaluation=True).unwrapped
-    env.reset(seed=3)
-    assert env.has_step and env.step_height == pytest.approx(0.25 * 0.5877, abs=1e-3)
-    ahead = env.terrain_height(np.array([env.step_edge - 0.01, env.step_edge + 0.01]))
-    assert ahead.tolist() == pytest.approx([0.0, env.step_height])
-    box = env.data.geom_xpos[env.model.geom("step").id]
-    assert box[0] < env.data.qpos[0] - 1.0  # the box lies towards world -x
-    assert env.crossed() is False
+    batch = make_batch(cfg.env, 1, evaluation=True, threads=1)
+    batch.reset(seed=3)
+    terrain, data, model = batch.task.terrain, batch.datas[0], batch.models[0]
+    assert terrain.has_step and terrain.height[0] == pytest.approx(0.25 * 0.5877, abs=1e-3)
+    edge = terrain.edge[0]
+    points = np.array([[[(edge - 0.01) * terrain.heading[0], (edge - 0.01) * terrain.heading[1]],
+                        [(edge + 0.01) * terrain.heading[0], (edge + 0.01) * terrain.heading[1]]]])
+    assert terrain.height_at(slice(0, 1), points)[0].tolist() == pytest.approx([0.0, terrain.height[0]])
+    mujoco.mj_kinematics(model, data)
+    box = data.geom_xpos[model.geom("step").id]
+    assert box[0] < data.qpos[0] - 1.0  # the box lies towards world -x
+    assert terrain.crossed(0, data.xpos[batch.world.trunk, :2]) is False
     after = scene("anybotics_anymal_b").read_bytes(), (ROBOTS_DIR / "anybotics_anymal_b" / "anymal_b.xml").read_bytes()
     assert before == after
 
@@ -358,14 +366,14 @@ def test_a_filmed_robot_whose_visual_meshes_were_left_out_is_drawn():
     one showed an empty floor. A rendered env draws them (in its own copy: a training env keeps the model's
     groups), and the frame has the robot in it: grey pixels that are not there when its geoms stay hidden."""
     from ppo_torchrl.compose import compose
-    from ppo_torchrl.envs import make_gym_env
+    from ppo_torchrl.envs import make_batch
 
     cfg = compose(["env=legged", f"env.xml_file={scene('unitree_go1')}", "env.locomotion.reset_noise_scale=0"])
-    plain = make_gym_env(cfg.env).unwrapped.model
+    plain = make_batch(cfg.env).models[0]
     robot_geoms = plain.body_rootid[plain.geom_bodyid] == plain.body("trunk").id
     assert (plain.geom_group[robot_geoms] == 3).all()  # as written: nothing of the robot drawn
-    filmed = make_gym_env(cfg.env, render_mode="rgb_array", width=96, height=72)
-    model = filmed.unwrapped.model
+    filmed = make_batch(cfg.env, 1, render_mode="rgb_array", width=96, height=72)
+    model = filmed.models[0]
     assert (model.geom_group[robot_geoms] == 0).all() and model.ngeom == plain.ngeom
     assert (model.geom_contype == plain.geom_contype).all() and (model.geom_size == plain.geom_size).all()
     filmed.reset(seed=0)
@@ -382,33 +390,34 @@ def test_a_step_of_height_zero_is_not_drawn():
     patches. Such a step is transparent (MuJoCo does not draw it) and the same box, raised, is drawn again;
     the frame at height 0 is the frame of a model whose step is far away."""
     from ppo_torchrl.compose import compose
-    from ppo_torchrl.envs import make_gym_env
+    from ppo_torchrl.envs import make_batch
 
     cfg = compose(["experiment=legged_trot", f"env.xml_file={scene('unitree_go2')}", "env.terrain.step_height=0",
                    "env.locomotion.reset_noise_scale=0"])
-    env = make_gym_env(cfg.env, render_mode="rgb_array", width=96, height=72).unwrapped
+    env = make_batch(cfg.env, 1, render_mode="rgb_array", width=96, height=72)
     env.reset(seed=0)
-    step = env.model.geom("step").id
-    assert env.model.geom_rgba[step, 3] == 0.0
+    model, terrain = env.models[0], env.task.terrain
+    step = model.geom("step").id
+    assert model.geom_rgba[step, 3] == 0.0
 
     def frame(height, distance):
-        env._place_step(height, distance)
-        mujoco.mj_forward(env.model, env.data)
+        terrain.place(0, height, distance, model)
+        mujoco.mj_forward(model, env.datas[0])
         env.render()  # (the first frame after a change can differ from the next ones)
         return env.render().astype(int)
 
-    flat = frame(0.0, env.model_step[1])
+    flat = frame(0.0, terrain.model_step[1])
     assert np.abs(frame(0.0, 1000.0) - flat).max() <= 8  # the same step, out of the camera's view
-    assert np.abs(frame(0.1, env.model_step[1]) - flat).max() > 8 and env.model.geom_rgba[step, 3] == 1.0
+    assert np.abs(frame(0.1, terrain.model_step[1]) - flat).max() > 8 and model.geom_rgba[step, 3] == 1.0
 
 
 def test_unnamed_feet_go_by_their_corner_in_evals():
     """ANYmal B's and A1's foot spheres have no name: the gait line and the sweep's columns call them by their
     corner (they said 'foot 0'..'foot 3'); named feet keep their names."""
     from ppo_torchrl.compose import compose
-    from ppo_torchrl.envs import make_gym_env
+    from ppo_torchrl.envs import make_batch
 
     for folder, names in (("anybotics_anymal_b", None), ("unitree_a1", None), ("unitree_go1", ["FL", "FR", "RL", "RR"])):
-        robot = make_gym_env(compose(["env=legged", f"env.xml_file={scene(folder)}"]).env).unwrapped
-        assert robot.foot_names == (names or robot.foot_corners), folder
-        assert sorted(robot.foot_corners) == ["LF", "LH", "RF", "RH"]
+        world = make_batch(compose(["env=legged", f"env.xml_file={scene(folder)}"]).env).world
+        assert list(world.foot_names) == (names or list(world.corners)), folder
+        assert sorted(world.corners) == ["LF", "LH", "RF", "RH"]

@@ -1,4 +1,4 @@
-"""Issue 18: the locomotion env (robots/env.py and its mixins): actuation limits, reward terms, terrain and its
+"""Issue 18: the locomotion env (on the batched legged env, tasks/locomotion/, one row): actuation limits, reward terms, terrain and its
 curriculum, observation extras, heading, tracking camera, and evaluation across step heights."""
 
 import copy
@@ -14,8 +14,7 @@ from omegaconf import OmegaConf
 
 from ppo_torchrl import evaluate
 from ppo_torchrl.tasks.locomotion import figures
-from ppo_torchrl.envs import gym_make_kwargs, make_gym_env
-from ppo_torchrl.positions import get_env_state, set_env_state
+from ppo_torchrl.envs import gym_make_kwargs, make_batch
 from ppo_torchrl.trainer import Trainer
 
 from conftest import TINY, compose_config
@@ -32,17 +31,48 @@ FACING_MINUS_X = """<mujoco><worldbody><geom name="floor" type="plane" size="20 
 </body></body></worldbody><actuator><motor joint="hip" ctrlrange="-1 1"/></actuator></mujoco>"""
 
 
-def env_of(*overrides, **kwargs):
-    return make_gym_env(compose_config(list(overrides)).env, **kwargs)
+def batch_of(*overrides, n: int = 1, evaluation: bool = False, **render):
+    """A batch of n rows of the config (one row: the env a test used to build before the rebuild)."""
+    return make_batch(compose_config(list(overrides)).env, n, evaluation, threads=1, **render)
 
 
-def rollout(env, steps, seed=0):
-    env.reset(seed=seed)
+def step(batch, action) -> tuple:
+    """Row 0's step: (observation, reward, terminated, truncated, its reward terms as reward_<name>)."""
+    obs, reward, term, trunc, _ = batch.step(np.asarray(action, np.float32)[None])
+    terms = {f"reward_{name}": float(v) for name, v in zip(batch.task.names, batch.task.last_terms[0])}
+    return obs[0], float(reward[0]), bool(term[0]), bool(trunc[0]), terms
+
+
+def reset(batch, seed=None) -> np.ndarray:
+    """Row 0's next episode (the one before it judged for the curriculum, as at any reset)."""
+    return batch.reset_row(0, seed).copy()
+
+
+def settle(batch) -> None:
+    """Row 0's state set by hand: its kinematics and what the task reads of it, as after a step."""
+    mujoco.mj_forward(batch.models[0], batch.datas[0])
+    batch._gather(0)
+
+
+def healthy(batch) -> bool:
+    return bool(batch.task._unhealthy(batch.reading)[0] == 0)
+
+
+def cross(batch) -> None:
+    """Row 0's trunk put 1 m past its step's edge (a success when the episode is judged)."""
+    terrain, d = batch.task.terrain, batch.datas[0]
+    along = terrain.edge[0] + 1.0
+    d.qpos[:2] = along * terrain.heading + (d.qpos[:2] - terrain.along(d.qpos[:2]) * terrain.heading)
+    mujoco.mj_kinematics(batch.models[0], d)
+
+
+def rollout(batch, steps, seed=0):
+    reset(batch, seed)
     rng = np.random.default_rng(seed)
     infos = []
     for _ in range(steps):
-        _, reward, terminated, _, info = env.step(rng.uniform(-1, 1, env.action_space.shape).astype(np.float32))
-        infos.append((reward, info))
+        _, reward, terminated, _, terms = step(batch, rng.uniform(-1, 1, batch.world.model.nu))
+        infos.append((reward, terms))
         if terminated:
             break
     return infos
@@ -52,21 +82,23 @@ def test_without_the_new_keys_an_mjcf_robot_steps_exactly_as_ant_v5():
     cfg = compose_config(["env=mjcf", f"env.xml_file={GYM_ANT_XML}"])
     kwargs = {k: v for k, v in gym_make_kwargs(cfg.env).items() if k not in ("legged", "terrain", "evaluation")}
     ant = gymnasium.make("Ant-v5", disable_env_checker=True, **kwargs)
-    ours = make_gym_env(cfg.env)
-    assert np.array_equal(ours.reset(seed=3)[0], ant.reset(seed=3)[0])
+    ours = batch_of("env=mjcf", f"env.xml_file={GYM_ANT_XML}")
+    assert np.array_equal(reset(ours, 3), ant.reset(seed=3)[0])
     for action in np.random.default_rng(0).uniform(-1, 1, (60, 8)).astype(np.float32):
-        a, b = ours.step(action), ant.step(action)
-        assert np.array_equal(a[0], b[0]) and a[1] == b[1] and a[2] == b[2]
+        a, b = step(ours, action), ant.step(action)
+        assert np.array_equal(ours.datas[0].qpos, ant.unwrapped.data.qpos)
+        # the control cost: float64 here, float32 there (NumPy 2's promotion of Ant-v5's float32 action), ~1e-7
+        assert np.array_equal(a[0], b[0]) and a[1] == pytest.approx(b[1], abs=1e-6) and a[2] == b[2]
 
 
 def test_reward_terms_follow_their_weights():
     base = ["env=quadruped", "env.locomotion.only_positive_rewards=false", "env.locomotion.target_speed=null"]
-    off = rollout(env_of(*base, *(f"env.locomotion.{w}=0" for w in WEIGHTS)), 40)
-    one = rollout(env_of(*base, *(f"env.locomotion.{w}=1" for w in WEIGHTS)), 40)
-    two = rollout(env_of(*base, *(f"env.locomotion.{w}=2" for w in WEIGHTS)), 40)
+    off = rollout(batch_of(*base, *(f"env.locomotion.{w}=0" for w in WEIGHTS)), 40)
+    one = rollout(batch_of(*base, *(f"env.locomotion.{w}=1" for w in WEIGHTS)), 40)
+    two = rollout(batch_of(*base, *(f"env.locomotion.{w}=2" for w in WEIGHTS)), 40)
     seen = set()
     for (r0, i0), (r1, i1), (r2, i2) in zip(off, one, two):
-        terms = {k: v for k, v in i1.items() if k.startswith("reward_") and k not in i0}
+        terms = {k: v for k, v in i1.items() if k not in i0}
         seen |= {k for k, v in terms.items() if v != 0}
         assert r1 == pytest.approx(r0 + sum(terms.values()))  # each weighted term is in the reward
         for key, value in terms.items():
@@ -76,22 +108,24 @@ def test_reward_terms_follow_their_weights():
 
 
 def test_target_speed_caps_the_forward_reward_and_only_positive_rewards_floors_it():
-    env = env_of("env=quadruped", "env.locomotion.target_speed=0.01")
-    for reward, info in rollout(env, 30):
+    batch = batch_of("env=quadruped", "env.locomotion.target_speed=0.01")
+    for reward, terms in rollout(batch, 30):
         assert reward >= 0.0  # only_positive_rewards (on in env=quadruped)
-        assert info["reward_forward"] <= 2.0 * 0.01 + 1e-12
+        assert terms["reward_forward"] <= 2.0 * 0.01 + 1e-12
 
 
 def test_joint_speed_and_torque_limits_hold_in_a_random_rollout():
+    from ppo_torchrl.tasks.locomotion.evaluation import GaitBatch
+
     def peak(*overrides):
-        env = env_of("env=quadruped", *overrides)
-        env.unwrapped.measure_gait = True
+        batch = batch_of("env=quadruped", *overrides)
+        batch.gait = GaitBatch(1, batch.world, None)  # sampled at every physics step
         top = 0.0
         for seed in (0, 1):
-            env.reset(seed=seed)
-            for reward, info in rollout(env, 100, seed):
-                assert np.abs(env.unwrapped.data.actuator_force).max() <= 40.0 + 1e-9
-            top = max(top, env.unwrapped.gait_summary()["peak_joint_speed"])
+            batch.gait.reset(0)
+            for _ in rollout(batch, 100, seed):
+                assert np.abs(batch.datas[0].actuator_force).max() <= 40.0 + 1e-9
+            top = max(top, batch.gait.meters[0].summary()["peak_joint_speed"])
         return top
 
     # env=quadruped: 40 N m, 8 rad/s. The drive's torque-speed line bounds what the motor can drive;
@@ -102,20 +136,21 @@ def test_joint_speed_and_torque_limits_hold_in_a_random_rollout():
 
 def test_the_joint_speed_limit_term_pays_for_the_fastest_physics_step_past_the_limit():
     def spun(weight):  # a joint spun to 20 rad/s, then one control step of 4 physics steps with no action
-        env = env_of("env=quadruped", f"env.locomotion.joint_speed_limit_cost_weight={weight}")
-        loco = env.unwrapped
-        env.reset(seed=0)
-        env.step(np.zeros(12, np.float32))
-        quiet = env.step(np.zeros(12, np.float32))[4]["reward_joint_speed_limit"]
-        loco.data.qvel[loco._act_dofs[2]] = 20.0
-        mujoco.mj_forward(loco.model, loco.data)
+        batch = batch_of("env=quadruped", f"env.locomotion.joint_speed_limit_cost_weight={weight}")
+        w, d = batch.world, batch.datas[0]
+        reset(batch, 0)
+        step(batch, np.zeros(12))
+        quiet = step(batch, np.zeros(12))[4]["reward_joint_speed_limit"]
+        d.qvel[w.act_dofs[2]] = 20.0
+        mujoco.mj_forward(batch.models[0], d)
         speeds = []  # the same control step, stepped by hand from the same state
-        data = copy.copy(loco.data)
-        for _ in range(loco.frame_skip):
-            mujoco.mj_step(loco.model, data)
-            speeds.append(np.abs(data.qvel[loco._act_dofs]))
-        info = env.step(np.zeros(12, np.float32))[4]
-        return quiet, info["reward_joint_speed_limit"], np.max(speeds, axis=0)
+        data = copy.copy(d)
+        data.ctrl[:] = w.ctrl_of(np.zeros((1, 12)))[0]
+        for _ in range(w.frame_skip):
+            mujoco.mj_step(batch.models[0], data)
+            speeds.append(np.abs(data.qvel[w.act_dofs]))
+        term = step(batch, np.zeros(12))[4]["reward_joint_speed_limit"]
+        return quiet, term, np.max(speeds, axis=0)
 
     quiet, term, peak = spun(1.0)
     assert quiet == 0.0  # standing still: no joint near 8 rad/s
@@ -125,89 +160,90 @@ def test_the_joint_speed_limit_term_pays_for_the_fastest_physics_step_past_the_l
 
 
 def test_step_height_is_drawn_in_range_and_the_curriculum_widens_on_success():
-    env = env_of("env=quadruped_step", "env.terrain.step_height_range=[0.0,0.2]", "env.terrain.curriculum_window=2",
-                 "env.terrain.curriculum_threshold=0.5", "env.terrain.curriculum_step=0.05")
-    loco = env.unwrapped
-    env.reset(seed=0)
-    assert loco.level == 0.0 and loco.step_height == 0.0 and 1.5 <= loco.step_edge <= 2.5
+    batch = batch_of("env=quadruped_step", "env.terrain.step_height_range=[0.0,0.2]", "env.terrain.curriculum_window=2",
+                     "env.terrain.curriculum_threshold=0.5", "env.terrain.curriculum_step=0.05")
+    terrain, start = batch.task.terrain, None
+    reset(batch, 0)
+    start = terrain._start_along
+    assert terrain.level[0] == 0.0 and terrain.height[0] == 0.0 and 1.5 <= terrain.edge[0] - start <= 2.5
     for episode in range(4):  # four successes in windows of two: the level rises twice
-        env.step(np.zeros(12, np.float32))
-        loco.data.qpos[0] = loco.step_edge + 1.0
-        mujoco.mj_kinematics(loco.model, loco.data)
-        env.reset()
-        assert 0.0 <= loco.step_height <= loco.level and 1.5 <= loco.step_edge <= 2.5
-    assert loco.level == pytest.approx(0.1)
-    top = loco.data.geom_xpos[loco.model.geom("step").id][2] + loco.model.geom_size[loco.model.geom("step").id][2]
-    assert top == pytest.approx(loco.step_height)  # the model's step is where the env says
-    env.step(np.zeros(12, np.float32))
-    env.reset()  # a failure (the trunk is back at the start) does not widen it
-    assert loco.level == pytest.approx(0.1)
+        step(batch, np.zeros(12))
+        cross(batch)
+        reset(batch)
+        assert 0.0 <= terrain.height[0] <= terrain.level[0] and 1.5 <= terrain.edge[0] - start <= 2.5
+    assert terrain.level[0] == pytest.approx(0.1)
+    model, data = batch.models[0], batch.datas[0]
+    geom = model.geom("step").id
+    mujoco.mj_kinematics(model, data)
+    assert data.geom_xpos[geom][2] + model.geom_size[geom][2] == pytest.approx(terrain.height[0])  # where it says
+    step(batch, np.zeros(12))
+    reset(batch)  # a failure (the trunk is back at the start) does not widen it
+    assert terrain.level[0] == pytest.approx(0.1)
     # logged each iteration: the level, and the success share of the last window (2) of episodes
-    assert loco.terrain_metrics() == {"env/terrain_level": pytest.approx(0.1), "env/terrain_success": 0.5}
+    assert terrain.metrics() == [{"env/terrain_level": pytest.approx(0.1), "env/terrain_success": 0.5}]
 
     heights = set()
-    for seed in range(20):  # no curriculum: the whole range
-        plain = env_of("env=quadruped_step", "env.terrain.curriculum=false").unwrapped
-        plain.reset(seed=seed)
-        heights.add(round(plain.step_height, 3))
-        assert 0.0 <= plain.step_height <= 0.2
+    plain = batch_of("env=quadruped_step", "env.terrain.curriculum=false", n=20)
+    plain.reset(seed=0)  # no curriculum: the whole range, each row its own draw
+    for h in plain.task.terrain.height:
+        heights.add(round(float(h), 3))
+        assert 0.0 <= h <= 0.2
     assert max(heights) > 0.1
 
 
 def test_the_curriculum_steps_down_when_success_falls_to_the_down_threshold():
-    env = env_of("env=quadruped_step", "env.terrain.curriculum_window=2", "env.terrain.curriculum_threshold=1",
-                 "env.terrain.curriculum_down_threshold=0", "env.terrain.curriculum_step=0.05")
-    loco = env.unwrapped
-    env.reset(seed=0)
+    batch = batch_of("env=quadruped_step", "env.terrain.curriculum_window=2", "env.terrain.curriculum_threshold=1",
+                     "env.terrain.curriculum_down_threshold=0", "env.terrain.curriculum_step=0.05")
+    terrain = batch.task.terrain
+    reset(batch, 0)
 
-    def episode(cross: bool):
-        env.step(np.zeros(12, np.float32))
-        if cross:
-            loco.data.qpos[0] = loco.step_edge + 1.0
-            mujoco.mj_kinematics(loco.model, loco.data)
-        env.reset()
+    def episode(crossed: bool):
+        step(batch, np.zeros(12))
+        if crossed:
+            cross(batch)
+        reset(batch)
 
     for outcome, level in [(True, 0.0), (True, 0.05), (True, 0.05), (True, 0.1), (False, 0.1), (True, 0.1),
                            (False, 0.1), (False, 0.05), (False, 0.05), (False, 0.0), (False, 0.0), (False, 0.0)]:
         episode(outcome)
-        assert loco.level == pytest.approx(level)  # a full window of 2: both crossed -> up, none -> down, else stay
-    assert loco.level >= 0.0 and 0.0 <= loco.step_height <= loco.level + 1e-12
+        assert terrain.level[0] == pytest.approx(level)  # a full window of 2: both crossed -> up, none -> down
+    assert terrain.level[0] >= 0.0 and 0.0 <= terrain.height[0] <= terrain.level[0] + 1e-12
 
 
 def test_a_curriculum_band_draws_heights_just_under_the_level():
-    env = env_of("env=quadruped_step", "env.terrain.curriculum_band=0.03")
-    loco = env.unwrapped
-    loco.level = 0.1
+    batch = batch_of("env=quadruped_step", "env.terrain.curriculum_band=0.03")
+    terrain = batch.task.terrain
+    terrain.level[0] = 0.1
     heights = []
     for seed in range(30):
-        env.reset(seed=seed)
-        heights.append(loco.step_height)
+        reset(batch, seed)
+        heights.append(float(terrain.height[0]))
     assert min(heights) >= 0.07 - 1e-12 and max(heights) <= 0.1 + 1e-12 and max(heights) - min(heights) > 0.01
-    loco.level = 0.02  # the band stops at the range's min (0)
-    env.reset(seed=0)
-    assert 0.0 <= loco.step_height <= 0.02
-    mixed = env_of("env=quadruped_step", "env.terrain.curriculum_band=0.03", "env.terrain.curriculum_band_share=0.5")
-    mixed.unwrapped.level = 0.1
+    terrain.level[0] = 0.02  # the band stops at the range's min (0)
+    reset(batch, 0)
+    assert 0.0 <= terrain.height[0] <= 0.02
+    mixed = batch_of("env=quadruped_step", "env.terrain.curriculum_band=0.03", "env.terrain.curriculum_band_share=0.5")
+    mixed.task.terrain.level[0] = 0.1
     heights = []
     for seed in range(60):
-        mixed.reset(seed=seed)
-        heights.append(mixed.unwrapped.step_height)
+        reset(mixed, seed)
+        heights.append(float(mixed.task.terrain.height[0]))
     below = np.mean(np.array(heights) < 0.07)  # from [0, 0.1] outside the band: 0.5 * 0.7 of them, ~0.35
     assert 0.15 < below < 0.6 and max(heights) <= 0.1 + 1e-12
 
 
 def test_flat_share_puts_episodes_on_flat_ground_that_the_curriculum_does_not_count():
     def episodes(*overrides, n=40):
-        env = env_of("env=quadruped_step", "env.terrain.curriculum_band=0.03", *overrides)
-        loco = env.unwrapped
-        loco.level = 0.1
+        batch = batch_of("env=quadruped_step", "env.terrain.curriculum_band=0.03", *overrides)
+        terrain = batch.task.terrain
+        terrain.level[0] = 0.1
         heights = []
         for seed in range(n):
-            env.reset(seed=seed)  # judges the episode before it (standing still: a failure) for the curriculum
-            heights.append(loco.step_height)
-            env.step(np.zeros(12, np.float32))
-        env.reset(seed=n)
-        return np.array(heights), len(loco.recent)
+            reset(batch, seed)  # judges the episode before it (standing still: a failure) for the curriculum
+            heights.append(float(terrain.height[0]))
+            step(batch, np.zeros(12))
+        reset(batch, n)
+        return np.array(heights), len(terrain.recent[0])
 
     plain, judged = episodes(n=15)
     assert (plain >= 0.07 - 1e-12).all() and judged == 15
@@ -220,52 +256,54 @@ def test_flat_share_puts_episodes_on_flat_ground_that_the_curriculum_does_not_co
 
 
 def test_the_step_lies_along_the_heading_of_a_robot_built_facing_minus_x():
-    env = env_of("env=quadruped_a1like_step", "env.terrain.step_height=0.15", "env.terrain.step_distance=[2.0,2.0]",
-                 "env.terrain.height_samples=30")
-    loco = env.unwrapped
-    env.reset(seed=0)
-    mujoco.mj_forward(loco.model, loco.data)
-    box = next(g for g in range(loco.model.ngeom) if loco.model.geom_bodyid[g] == loco._step_id)
-    near_x = loco.data.geom_xpos[box][0] + loco.model.geom_size[box][0]  # the box's face towards +x
-    assert list(loco.heading) == pytest.approx([-1.0, 0.0]) and loco.step_edge == pytest.approx(2.0)
+    batch = batch_of("env=quadruped_a1like_step", "env.terrain.step_height=0.15", "env.terrain.step_distance=[2.0,2.0]",
+                     "env.terrain.height_samples=30")
+    terrain, model, data = batch.task.terrain, batch.models[0], batch.datas[0]
+    obs = reset(batch, 0)
+    mujoco.mj_forward(model, data)
+    box = batch.world.step_geom
+    near_x = data.geom_xpos[box][0] + model.geom_size[box][0]  # the box's face towards +x
+    assert list(batch.world.heading) == pytest.approx([-1.0, 0.0])
+    assert terrain.edge[0] - terrain._start_along == pytest.approx(2.0)
     assert near_x == pytest.approx(-2.0)  # 2 m ahead of the trunk's start (x = 0), along -x
-    assert loco.data.geom_xpos[box][2] + loco.model.geom_size[box][2] == pytest.approx(0.15)
-    heights = env.unwrapped._get_obs()[-30:]  # 10 cm apart from under the trunk: 0 up to 2 m, then 15 cm
+    assert data.geom_xpos[box][2] + model.geom_size[box][2] == pytest.approx(0.15)
+    heights = obs[-30:]  # 10 cm apart from under the trunk: 0 up to 2 m, then 15 cm
     assert (heights[:20] == 0).all() and heights[20:] == pytest.approx(0.15)
-    assert not loco.crossed()
-    loco.data.qpos[0] -= 2.6  # 60 cm past the edge, nose first
-    mujoco.mj_kinematics(loco.model, loco.data)
-    assert loco.crossed()
+    trunk = lambda: data.xpos[batch.world.trunk, :2]  # noqa: E731
+    assert not terrain.crossed(0, trunk())
+    data.qpos[0] -= 2.6  # 60 cm past the edge, nose first
+    mujoco.mj_kinematics(model, data)
+    assert terrain.crossed(0, trunk())
 
 
 def test_the_contacts_read_once_per_control_step_match_a_fresh_reading():
     # contact flags and height samples observed, trunk contact ends; a fall line at 42 cm ends episodes often
-    env = env_of("experiment=quadruped_climb", "env.locomotion.healthy_z_range=[0.42,1.0]")
-    loco = env.unwrapped
-    env.reset(seed=3)
+    batch = batch_of("experiment=quadruped_climb", "env.locomotion.healthy_z_range=[0.42,1.0]")
+    fresh = type(batch.task.contacts)(1, batch.world)
+    reset(batch, 3)
     rng = np.random.default_rng(3)
     ended = 0
     for _ in range(300):
-        obs, _, terminated, _, _ = env.step(rng.uniform(-1, 1, 12).astype(np.float32))
-        feet, _ = loco._contacts()  # outside step: read afresh from the simulator
-        assert (obs[-24:-20] == feet).all()
-        assert terminated == ((not loco.is_healthy) or loco.touches_ground())
+        obs, _, terminated, _, _ = step(batch, rng.uniform(-1, 1, 12))
+        fresh.read(0, batch.datas[0])  # outside the step: read afresh from the simulator
+        assert (obs[-24:-20] == fresh.feet[0]).all()
+        assert terminated == ((not healthy(batch)) or fresh.ending[0] >= 0)
         if terminated:
             ended += 1
-            env.reset(seed=ended)
+            reset(batch, ended)
     assert 5 < ended < 300  # the end test was exercised both ways
 
 
 def test_terminate_on_contact_ends_the_episode_when_the_trunk_touches_down():
     def trunk_on_the_ground(*overrides):
-        env = env_of("env=quadruped", "env.locomotion.healthy_z_range=[0.0,2.0]", *overrides)
-        loco = env.unwrapped
-        env.reset(seed=0)
-        loco.data.qpos[2:7] = [0.07, 0.0, 1.0, 0.0, 0.0]  # on its back, legs up: the trunk's box (7 cm half height) lies on the floor
-        mujoco.mj_forward(loco.model, loco.data)
-        _, _, terminated, _, info = env.step(np.zeros(12, np.float32))
-        assert info["termination"] == loco.termination and terminated == (loco.termination is not None)
-        return loco.termination
+        batch = batch_of("env=quadruped", "env.locomotion.healthy_z_range=[0.0,2.0]", *overrides)
+        reset(batch, 0)
+        batch.datas[0].qpos[2:7] = [0.07, 0.0, 1.0, 0.0, 0.0]  # on its back, legs up: the trunk's box on the floor
+        mujoco.mj_forward(batch.models[0], batch.datas[0])
+        terminated = step(batch, np.zeros(12))[2]
+        why = batch.task.termination(0)
+        assert terminated == (why is not None)
+        return why
 
     assert trunk_on_the_ground("env.locomotion.terminate_on_contact=[trunk]") == "contact: trunk"
     assert trunk_on_the_ground() is None  # off by default: only healthy_z_range ends an episode
@@ -273,17 +311,17 @@ def test_terminate_on_contact_ends_the_episode_when_the_trunk_touches_down():
     assert trunk_on_the_ground("env.locomotion.terminate_on_contact=[trunk]",
                                "env.locomotion.healthy_z_range=[0.2,2.0]") == "contact: trunk"
     assert trunk_on_the_ground("env.locomotion.healthy_z_range=[0.2,2.0]") == "fall"
-    env = env_of("env=quadruped", "env.locomotion.terminate_on_contact=[trunk]")
-    env.reset(seed=0)
-    assert not any(env.step(np.zeros(12, np.float32))[2] for _ in range(5))  # standing: the feet touch, not the trunk
+    batch = batch_of("env=quadruped", "env.locomotion.terminate_on_contact=[trunk]")
+    reset(batch, 0)
+    assert not any(step(batch, np.zeros(12))[2] for _ in range(5))  # standing: the feet touch, not the trunk
 
 
 def test_the_env_says_why_an_episode_ends():
     def first_step(*overrides):
-        env = env_of("env=quadruped", *overrides)
-        env.reset(seed=0)
-        _, _, terminated, _, info = env.step(np.zeros(12, np.float32))
-        return terminated, info["termination"]
+        batch = batch_of("env=quadruped", *overrides)
+        reset(batch, 0)
+        terminated = step(batch, np.zeros(12))[2]
+        return terminated, batch.task.termination(0)
 
     assert first_step() == (False, None)  # standing in its healthy range
     assert first_step("env.locomotion.healthy_z_range=[0.6,1.0]") == (True, "fall")  # the trunk stands at ~0.45 m
@@ -293,22 +331,23 @@ def test_the_env_says_why_an_episode_ends():
 
 
 def test_healthy_z_above_terrain_reads_the_fall_line_from_the_step_top():
-    def healthy(z_above_terrain, beyond_edge, height_above_ground):
-        env = env_of("env=quadruped_step", "env.terrain.step_height=0.15", "env.locomotion.healthy_z_range=[0.2,1.0]",
-                     f"env.locomotion.healthy_z_above_terrain={z_above_terrain}")
-        loco = env.unwrapped
-        env.reset(seed=0)
-        along = loco.step_edge + (0.5 if beyond_edge else -0.5)
+    def is_healthy(z_above_terrain, beyond_edge, height_above_ground):
+        batch = batch_of("env=quadruped_step", "env.terrain.step_height=0.15",
+                         "env.locomotion.healthy_z_range=[0.2,1.0]",
+                         f"env.locomotion.healthy_z_above_terrain={z_above_terrain}")
+        reset(batch, 0)
+        terrain = batch.task.terrain
+        along = terrain.edge[0] + (0.5 if beyond_edge else -0.5)
         ground = 0.15 if beyond_edge else 0.0
-        loco.data.qpos[:3] = [along * loco.heading[0], along * loco.heading[1], ground + height_above_ground]
-        mujoco.mj_forward(loco.model, loco.data)
-        return loco.is_healthy
+        batch.datas[0].qpos[:3] = [along * terrain.heading[0], along * terrain.heading[1], ground + height_above_ground]
+        settle(batch)
+        return healthy(batch)
 
     # 12 cm above the step's top is 27 cm above the floor: over the 20 cm line in world z, under it above the terrain
-    assert healthy(False, True, 0.12) and not healthy(True, True, 0.12)
-    assert healthy(True, True, 0.3)
+    assert is_healthy(False, True, 0.12) and not is_healthy(True, True, 0.12)
+    assert is_healthy(True, True, 0.3)
     for on in (False, True):  # before the edge the terrain is the floor: the two readings agree
-        assert healthy(on, False, 0.3) and not healthy(on, False, 0.12)
+        assert is_healthy(on, False, 0.3) and not is_healthy(on, False, 0.12)
 
 
 def test_the_climb_preset_composes_to_the_recipe_and_builds_its_env():
@@ -317,10 +356,10 @@ def test_the_climb_preset_composes_to_the_recipe_and_builds_its_env():
     assert (loco.target_speed, list(loco.terminate_on_contact), terrain.curriculum_band, terrain.curriculum_band_share,
             terrain.height_samples, cfg.optim.lr) == (0.6, ["trunk"], 0.04, 0.7, 20, 1e-4)
     assert (loco.joint_speed_limit_cost_weight, loco.feet_air_time_weight) == (1.0, 2.0)
-    env, blind = make_gym_env(cfg.env), env_of("env=quadruped_step")
-    env.reset(seed=0)
-    assert env.observation_space.shape[0] == blind.observation_space.shape[0] + 4 + 20  # 4 feet, 20 heights
-    assert 1.0 <= env.unwrapped.step_edge <= 2.0
+    batch, blind = make_batch(cfg.env, 1, threads=1), batch_of("env=quadruped_step")
+    reset(batch, 0)
+    assert batch.task.obs_dim == blind.task.obs_dim + 4 + 20  # 4 feet, 20 heights
+    assert 1.0 <= batch.task.terrain.edge[0] - batch.task.terrain._start_along <= 2.0
 
 
 def test_the_trot_recipe_is_the_clock_preset_then_its_flat_ground_fine_tune():
@@ -337,80 +376,82 @@ def test_the_trot_recipe_is_the_clock_preset_then_its_flat_ground_fine_tune():
             fine.collector.total_frames) == (1.0, 0.2, 3e-5, 2_000_000)
 
 
-def test_the_curriculum_and_the_step_travel_with_the_env_state():
-    env = env_of("env=quadruped_step", "env.terrain.curriculum_window=1", "env.terrain.curriculum_threshold=1")
-    env.reset(seed=0)
-    env.step(np.zeros(12, np.float32))
-    env.unwrapped.data.qpos[0] = 9.0
-    mujoco.mj_kinematics(env.unwrapped.model, env.unwrapped.data)
-    env.reset()
-    env.step(np.ones(12, np.float32) * 0.3)
-    saved = get_env_state(env)
-    fresh = env_of("env=quadruped_step", "env.terrain.curriculum_window=1", "env.terrain.curriculum_threshold=1")
-    fresh.reset(seed=5)
-    set_env_state(fresh, saved)
-    a, b = env.unwrapped, fresh.unwrapped
-    assert b.level == a.level == pytest.approx(0.02)
-    assert (b.step_height, b.step_edge) == (a.step_height, a.step_edge)
-    np.testing.assert_array_equal(b.model.body_pos, a.model.body_pos)
-    action = np.full(12, -0.2, np.float32)
-    first, second = env.step(action), fresh.step(action)
+def test_the_curriculum_and_the_step_travel_with_the_row_position():
+    config = ("env=quadruped_step", "env.terrain.curriculum_window=1", "env.terrain.curriculum_threshold=1")
+    batch = batch_of(*config)
+    reset(batch, 0)
+    step(batch, np.zeros(12))
+    batch.datas[0].qpos[0] = 9.0
+    mujoco.mj_kinematics(batch.models[0], batch.datas[0])
+    reset(batch)
+    step(batch, np.ones(12) * 0.3)
+    saved = batch.row_position(0)
+    fresh = batch_of(*config)
+    reset(fresh, 5)
+    fresh.restore_row(0, saved)
+    a, b = batch.task.terrain, fresh.task.terrain
+    assert b.level[0] == a.level[0] == pytest.approx(0.02)
+    assert (b.height[0], b.edge[0]) == (a.height[0], a.edge[0])
+    np.testing.assert_array_equal(fresh.models[0].body_pos, batch.models[0].body_pos)
+    action = np.full(12, -0.2)
+    first, second = step(batch, action), step(fresh, action)
     assert np.array_equal(first[0], second[0]) and first[1] == second[1]
 
 
 def test_eval_envs_use_the_eval_height_and_a_fixed_height_wins():
-    evaluation = env_of("env=quadruped_step", evaluation=True).unwrapped
-    evaluation.reset(seed=0)
-    assert evaluation.step_height == 0.15
-    fixed = env_of("env=quadruped_step", "env.terrain.step_height=0.07", evaluation=True).unwrapped
-    fixed.reset(seed=0)
-    assert fixed.step_height == 0.07
-    old = env_of("env=quadruped_step", "env.terrain.step_height_range=null", "env.terrain.curriculum=false",
-                 "env.terrain.step_distance=null", "env.terrain.eval_step_height=null").unwrapped
-    old.reset(seed=0)
-    assert old.step_height == pytest.approx(0.15) and old.step_edge == pytest.approx(2.0)  # the model's own step
+    evaluation = batch_of("env=quadruped_step", evaluation=True)
+    reset(evaluation, 0)
+    assert evaluation.task.terrain.height[0] == 0.15
+    fixed = batch_of("env=quadruped_step", "env.terrain.step_height=0.07", evaluation=True)
+    reset(fixed, 0)
+    assert fixed.task.terrain.height[0] == 0.07
+    old = batch_of("env=quadruped_step", "env.terrain.step_height_range=null", "env.terrain.curriculum=false",
+                   "env.terrain.step_distance=null", "env.terrain.eval_step_height=null", evaluation=True)
+    reset(old, 0)
+    terrain = old.task.terrain
+    assert terrain.height[0] == pytest.approx(0.15) and terrain.edge[0] - terrain._start_along == pytest.approx(2.0)
 
 
 def test_contacts_and_height_samples_extend_the_observation():
-    blind = env_of("env=quadruped_step").observation_space.shape[0]
-    seeing = env_of("env=quadruped_step", "env.terrain.observe_contacts=true", "env.terrain.height_samples=30",
-                    "env.terrain.step_height=0.12", "env.terrain.step_distance=[1.0,1.0]")
-    assert seeing.observation_space.shape[0] == blind + 4 + 30
-    obs, _ = seeing.reset(seed=0)
+    blind = batch_of("env=quadruped_step").task.obs_dim
+    seeing = batch_of("env=quadruped_step", "env.terrain.observe_contacts=true", "env.terrain.height_samples=30",
+                      "env.terrain.step_height=0.12", "env.terrain.step_distance=[1.0,1.0]")
+    assert seeing.task.obs_dim == blind + 4 + 30
+    obs = reset(seeing, 0)
     samples = obs[-30:]  # 0 to 2.9 m ahead of the trunk; the edge is 1 m ahead
     assert set(np.round(samples, 3)) == {0.0, 0.12} and samples[0] == 0.0 and samples[-1] == pytest.approx(0.12)
     for _ in range(25):
-        obs, *_ = seeing.step(np.zeros(12, np.float32))
+        obs = step(seeing, np.zeros(12))[0]
     assert obs[-34:-30].tolist() == [1.0] * 4  # standing: four feet down
-    assert seeing.unwrapped._contacts()[1] == 0  # and no non-foot body (the shanks carry the feet)
+    assert seeing.task.contacts.body[0] == 0  # and no non-foot body (the shanks carry the feet)
 
 
-def test_the_trot_clock_is_observed_pays_the_diagonal_schedule_and_travels_with_the_env_state():
+def test_the_trot_clock_is_observed_pays_the_diagonal_schedule_and_travels_with_the_row_position():
     clock = ("env.locomotion.gait_period=0.4", "env.locomotion.gait_clock_weight=0.5")
-    plain = env_of("env=quadruped").observation_space.shape[0]
-    env = env_of("env=quadruped", *clock)
-    assert env.observation_space.shape[0] == plain + 2
-    obs, _ = env.reset(seed=0)
+    plain = batch_of("env=quadruped").task.obs_dim
+    batch = batch_of("env=quadruped", *clock)
+    assert batch.task.obs_dim == plain + 2
+    obs = reset(batch, 0)
     assert obs[-2:].tolist() == [0.0, 1.0]  # sin, cos of phase 0
-    robot = env.unwrapped
-    lf_rh = np.array([c in ("LF", "RH") for c in robot.foot_corners])
+    lf_rh = np.array([c in ("LF", "RH") for c in batch.world.corners])
+    fresh = type(batch.task.contacts)(1, batch.world)
     for k in range(1, 31):  # 20 control steps of 0.02 s make one 0.4 s period
-        obs, _, _, _, info = env.step(np.zeros(12, np.float32))
+        obs, _, _, _, terms = step(batch, np.zeros(12))
         angle = 2 * np.pi * ((k * 0.02 / 0.4) % 1.0)
         np.testing.assert_allclose(obs[-2:], [np.sin(angle), np.cos(angle)], atol=1e-9)
-        feet, _ = robot._read_contacts()[1:]
+        fresh.read(0, batch.datas[0])
         meant = lf_rh if ((k - 1) * 0.02 / 0.4) % 1.0 < 0.5 else ~lf_rh  # the phase the step was taken in
-        assert info["reward_gait_clock"] == pytest.approx(0.5 * (feet == meant).mean())
-    saved = get_env_state(env)
-    fresh = env_of("env=quadruped", *clock)
-    fresh.reset(seed=3)
-    set_env_state(fresh, saved)
-    action = np.full(12, 0.1, np.float32)
-    first, second = env.step(action), fresh.step(action)
+        assert terms["reward_gait_clock"] == pytest.approx(0.5 * (fresh.feet[0] == meant).mean())
+    saved = batch.row_position(0)
+    other = batch_of("env=quadruped", *clock)
+    reset(other, 3)
+    other.restore_row(0, saved)
+    action = np.full(12, 0.1)
+    first, second = step(batch, action), step(other, action)
     assert np.array_equal(first[0], second[0]) and first[1] == second[1]
     with pytest.raises(Exception, match="four feet"):
-        env_of("env=mjcf", f"env.xml_file={GYM_ANT_XML}", "env.locomotion.gait_period=0.4",
-               "env.locomotion.foot_geoms=[left_ankle_geom]")
+        batch_of("env=mjcf", f"env.xml_file={GYM_ANT_XML}", "env.locomotion.gait_period=0.4",
+                 "env.locomotion.foot_geoms=[left_ankle_geom]")
 
 
 def test_heading_auto_makes_a_minus_x_model_move_forward(tmp_path):
@@ -418,11 +459,12 @@ def test_heading_auto_makes_a_minus_x_model_move_forward(tmp_path):
     path.write_text(FACING_MINUS_X)
 
     def forward_velocity(heading):
-        env = env_of("env=mjcf", f"env.xml_file={path}", "env.locomotion.main_body=base",
-                     f"env.locomotion.heading={heading}", "env.locomotion.healthy_z_range=[0.0,5.0]")
-        env.reset(seed=0)
-        env.unwrapped.data.qvel[0] = -1.0  # along the base's own +x: world -x
-        return env.step(np.zeros(1, np.float32))[4]["forward_velocity"]
+        batch = batch_of("env=mjcf", f"env.xml_file={path}", "env.locomotion.main_body=base",
+                         f"env.locomotion.heading={heading}", "env.locomotion.healthy_z_range=[0.0,5.0]")
+        reset(batch, 0)
+        batch.datas[0].qvel[0] = -1.0  # along the base's own +x: world -x
+        step(batch, np.zeros(1))
+        return float(batch.task.progress[0])
 
     assert forward_velocity("auto") > 0.5
     assert forward_velocity("-x") > 0.5 and forward_velocity("180") > 0.5
@@ -433,41 +475,43 @@ def test_a_model_without_a_track_camera_gets_one_when_rendered(tmp_path):
     path = tmp_path / "no_camera.xml"
     path.write_text(FACING_MINUS_X)
     assert mujoco.MjModel.from_xml_path(str(path)).ncam == 0
-    env = env_of("env=mjcf", f"env.xml_file={path}", "env.locomotion.main_body=base", "env.locomotion.heading=auto",
-                 render_mode="rgb_array", width=64, height=48)
-    model = env.unwrapped.model
+    batch = batch_of("env=mjcf", f"env.xml_file={path}", "env.locomotion.main_body=base", "env.locomotion.heading=auto",
+                     render_mode="rgb_array", width=64, height=48)
+    model = batch.models[0]
     camera = model.camera("track")
     assert model.cam_mode[camera.id] == mujoco.mjtCamLight.mjCAMLIGHT_TRACKCOM
     assert model.cam_bodyid[camera.id] == model.body("base").id
-    assert env.unwrapped.mujoco_renderer.camera_id == camera.id
-    env.reset(seed=0)
-    data = env.unwrapped.data
+    reset(batch, 0)
+    assert batch.render().shape == (48, 64, 3)  # filmed from it
+    data = batch.datas[0]
     image_right = data.cam_xmat[camera.id].reshape(3, 3)[:, 0]  # the camera's x axis: right in the image
-    assert image_right[:2] @ env.unwrapped.heading > 0.99  # the robot walks to the right of the frame
-    assert make_gym_env(compose_config(["env=mjcf", f"env.xml_file={path}", "env.locomotion.main_body=base"]).env
-                        ).unwrapped.model.ncam == 0  # not rendered: the model as written
+    assert image_right[:2] @ batch.world.heading > 0.99  # the robot walks to the right of the frame
+    assert batch_of("env=mjcf", f"env.xml_file={path}", "env.locomotion.main_body=base"
+                    ).models[0].ncam == 0  # not rendered: the model as written
+    batch.close()
 
 
 def test_the_a1like_quadruped_faces_minus_x_stands_and_gets_a_tracking_camera():
     """env=quadruped_a1like: a second quadruped (its own names, built facing -x, no camera) under the recipe."""
-    env = env_of("env=quadruped_a1like")
-    loco = env.unwrapped
-    model = loco.model
+    batch = batch_of("env=quadruped_a1like")
+    model, w = batch.models[0], batch.world
     assert 12.0 < model.body_subtreemass[model.body("trunk").id] < 13.0 and model.nu == 12 and model.ncam == 0
-    assert np.allclose(loco.heading, [-1.0, 0.0])  # heading=auto: the trunk's nose, world -x
-    assert [model.geom(int(g)).name for g in loco.feet] == ["FL_foot", "FR_foot", "RL_foot", "RR_foot"]
+    assert np.allclose(w.heading, [-1.0, 0.0])  # heading=auto: the trunk's nose, world -x
+    assert [model.geom(int(g)).name for g in w.feet] == ["FL_foot", "FR_foot", "RL_foot", "RR_foot"]
     assert np.allclose(np.abs(model.actuator_forcerange), 33.5)  # the A1's drives
-    env.reset(seed=0)
+    reset(batch, 0)
+    fresh = type(batch.task.contacts)(1, w)
     for _ in range(100):  # 2 s under zero action: it stands, on its four feet and nothing else
-        _, _, terminated, _, info = env.step(np.zeros(12, np.float32))
-        assert not terminated
-    assert loco.data.qpos[2] > 0.22 and loco._contacts()[0].all() and loco._contacts()[1] == 0
-    loco.data.qvel[0] = -0.5  # pushed along its nose
-    assert env.step(np.zeros(12, np.float32))[4]["forward_velocity"] > 0.2
-    rendered = env_of("env=quadruped_a1like", render_mode="rgb_array", width=64, height=48).unwrapped
-    camera = rendered.model.camera("track")
-    assert rendered.model.cam_bodyid[camera.id] == rendered.model.body("trunk").id
-    assert rendered.mujoco_renderer.camera_id == camera.id
+        assert not step(batch, np.zeros(12))[2]
+    fresh.read(0, batch.datas[0])
+    assert batch.datas[0].qpos[2] > 0.22 and fresh.feet[0].all() and fresh.body[0] == 0
+    batch.datas[0].qvel[0] = -0.5  # pushed along its nose
+    step(batch, np.zeros(12))
+    assert batch.task.progress[0] > 0.2
+    rendered = batch_of("env=quadruped_a1like", render_mode="rgb_array", width=64, height=48)
+    camera = rendered.models[0].camera("track")
+    assert rendered.models[0].cam_bodyid[camera.id] == rendered.models[0].body("trunk").id
+    rendered.close()
 
 
 @pytest.mark.parametrize("args, expected", [
@@ -632,16 +676,17 @@ def test_a_foot_held_up_at_a_standstill_is_not_counted_as_in_the_air_while_movin
 
 
 def test_each_foot_is_placed_at_its_corner_along_the_heading(tmp_path):
-    assert env_of("env=quadruped").unwrapped.foot_corners == ["LF", "RF", "LH", "RH"]
-    a1like = env_of("env=quadruped_a1like").unwrapped  # built facing -x: its front is world -x
-    assert a1like.foot_names == ["FL_foot", "FR_foot", "RL_foot", "RR_foot"]
-    assert a1like.foot_corners == ["LF", "RF", "LH", "RH"]
-    ant = env_of("env=mjcf", f"env.xml_file={GYM_ANT_XML}").unwrapped  # legs out at 45 degrees, in turn round
-    assert ant.foot_corners == ["LF", "LH", "RH", "RF"]
+    corners = lambda *o: batch_of(*o).world.corners  # noqa: E731
+    assert list(corners("env=quadruped")) == ["LF", "RF", "LH", "RH"]
+    a1like = batch_of("env=quadruped_a1like").world  # built facing -x: its front is world -x
+    assert list(a1like.foot_names) == ["FL_foot", "FR_foot", "RL_foot", "RR_foot"]
+    assert list(a1like.corners) == ["LF", "RF", "LH", "RH"]
+    # legs out at 45 degrees, in turn round
+    assert list(corners("env=mjcf", f"env.xml_file={GYM_ANT_XML}")) == ["LF", "LH", "RH", "RF"]
     (tmp_path / "one_leg.xml").write_text(FACING_MINUS_X)
-    one_leg = env_of("env=mjcf", f"env.xml_file={tmp_path / 'one_leg.xml'}", "env.locomotion.main_body=base",
-                     "env.locomotion.heading=-x").unwrapped
-    assert len(one_leg.feet) == 1 and one_leg.foot_corners is None  # no pair figures
+    one_leg = batch_of("env=mjcf", f"env.xml_file={tmp_path / 'one_leg.xml'}", "env.locomotion.main_body=base",
+                       "env.locomotion.heading=-x").world
+    assert len(one_leg.feet) == 1 and one_leg.corners is None  # no pair figures
 
 
 def test_height_sweep_writes_a_csv_and_a_success_curve(step_run, tmp_path):

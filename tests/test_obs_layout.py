@@ -12,7 +12,7 @@ import pytest
 import torch
 
 from ppo_torchrl.errors import ConfigError
-from ppo_torchrl.layout import ObservationLayout, Segment, layout_of
+from ppo_torchrl.layout import ObservationLayout, Segment
 from ppo_torchrl.normalization import ObservationNormalizer, make_observation_normalizer, obs_scale, standardize
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -75,15 +75,15 @@ def test_a_go1_reads_a_quarter_leg_step_inside_the_clip_whatever_the_running_sta
 
 
 def test_the_go1_layout_is_derived_from_the_model_and_flags_and_clock_pass_as_they_are():
-    from ppo_torchrl.envs import make_gym_env
-    from ppo_torchrl.robots.env import HEIGHT_CLIP
+    from ppo_torchrl.envs import make_batch
     from ppo_torchrl.robots.model import read_robot
+    from ppo_torchrl.tasks.locomotion.task import HEIGHT_CLIP
 
     cfg, l = go1_cfg()
-    env = make_gym_env(cfg.env)
-    layout = layout_of(env)
+    env = make_batch(cfg.env)
+    layout = env.observation_layout()
     robot = read_robot(GO1)
-    assert layout.where("terrain_heights") == slice(39, 59) and layout.size == env.observation_space.shape[0] == 61
+    assert layout.where("terrain_heights") == slice(39, 59) and layout.size == env.single_observation_space.shape[0] == 61
     segment = layout.segments[2]
     assert (segment.treatment, segment.offset, segment.scale, segment.clip) == ("fixed", -robot.height, l, HEIGHT_CLIP)
     norm = make_observation_normalizer(cfg.env.transforms, layout.size, layout=layout)
@@ -167,7 +167,7 @@ def test_a_legged_run_saved_before_the_layout_is_normalized_as_it_trained():
     from omegaconf import OmegaConf
 
     from ppo_torchrl.compose import compose
-    from ppo_torchrl.envs import make_gym_env
+    from ppo_torchrl.envs import make_batch
 
     cfg, _ = go1_cfg()
     assert cfg.env.legged.obs_layout == "segments"
@@ -179,14 +179,16 @@ def test_a_legged_run_saved_before_the_layout_is_normalized_as_it_trained():
     from ppo_torchrl.config import Config
 
     saved = OmegaConf.merge(OmegaConf.structured(Config), saved)  # as config.run_config reads it back
-    env = make_gym_env(saved.env)
-    assert layout_of(env) == ObservationLayout.whole(61)
-    obs, _ = env.reset(seed=0)
-    u = env.unwrapped
-    assert obs[39:59].tolist() == u.terrain_height(u._along(u.data.xpos[u._body_id]) + u._sample_offsets).tolist()
+    env = make_batch(saved.env)
+    assert env.observation_layout() == ObservationLayout.whole(61)
+    obs = env.reset(seed=0)[0][0]
+    trunk, task = env.datas[0].xpos[env.world.trunk], env.task
+    points = trunk[None, None, :2] + task._offsets[None, :, None] * env.world.heading  # 10 cm apart along the heading
+    assert obs[39:59].tolist() == task.terrain.height_at(slice(0, 1), points)[0].tolist()  # world heights (whole)
+    layout = env.observation_layout()
     rng = np.random.default_rng(2)
     stats = {"mean": rng.normal(size=61), "var": rng.uniform(1e-6, 2.0, size=61), "count": 10.0}
-    norm = make_observation_normalizer(saved.env.transforms, 61, stats, frozen=True, layout=layout_of(env))
+    norm = make_observation_normalizer(saved.env.transforms, 61, stats, frozen=True, layout=layout)
     x = rng.normal(scale=3.0, size=(7, 61))
     assert np.array_equal(norm.apply(x), standardize(x, stats["mean"], obs_scale(stats["var"], 1e-8), 10.0))
 

@@ -20,11 +20,24 @@ GO1 = ROBOTS_DIR / "unitree_go1" / "scene.xml"
 
 
 def go1(*overrides):
+    """A one-row batch of recipe v2's Go1, its curriculum off."""
     from ppo_torchrl.compose import compose
-    from ppo_torchrl.envs import make_gym_env
+    from ppo_torchrl.envs import make_batch
 
     cfg = compose(["experiment=legged_trot_v2", f"env.xml_file={GO1}", "env.terrain.curriculum=false", *overrides])
-    return make_gym_env(cfg.env)
+    return make_batch(cfg.env, 1, threads=1)
+
+
+def step(batch, action) -> tuple:
+    obs, reward, terminated, truncated, _ = batch.step(np.asarray(action)[None])
+    return obs[0], float(reward[0]), bool(terminated[0]), bool(truncated[0])
+
+
+def contacts_now(batch):
+    """Row 0's contact readings afresh from its simulator (sensors.Contacts)."""
+    fresh = type(batch.task.contacts)(1, batch.world)
+    fresh.read(0, batch.datas[0])
+    return fresh
 
 
 def robot_robot(model, data) -> list:
@@ -55,10 +68,10 @@ def test_with_the_filter_the_robot_touches_the_terrain_and_never_itself():
     with contacts=terrain; random steps make no robot-robot contact (and no trunk-thigh one) while the feet stand
     on the floor, and a trunk on the floor still counts as a body contact and ends the episode."""
     env = go1()
-    plain, filtered = go1("env.legged.contacts=model").unwrapped, env.unwrapped
-    assert plain.contact_filter is None and filtered.contact_filter == (42, 0)  # every Go1 geom can touch the floor
-    qpos = crossed_legs(plain.model, plain.data)
-    model, data = filtered.model, filtered.data
+    plain = go1("env.legged.contacts=model")
+    assert plain.world.contact_filter is None and env.world.contact_filter == (42, 0)  # every Go1 geom can touch the floor
+    qpos = crossed_legs(plain.models[0], plain.datas[0])
+    model, data = env.models[0], env.datas[0]
     data.qpos[:] = qpos
     mujoco.mj_forward(model, data)
     assert robot_robot(model, data) == []
@@ -69,22 +82,21 @@ def test_with_the_filter_the_robot_touches_the_terrain_and_never_itself():
     thighs = {model.body(f"{leg}_thigh").id for leg in ("FL", "FR", "RL", "RR")}
     feet_down = 0
     for _ in range(200):
-        _, _, terminated, truncated, _ = env.step(np.clip(0.4 * rng.normal(size=12), -1, 1))
+        _, _, terminated, truncated = step(env, np.clip(0.4 * rng.normal(size=12), -1, 1))
         assert robot_robot(model, data) == []
         bodies = {frozenset(model.geom_bodyid[g] for g in pair) for pair in data.contact.geom[: data.ncon]}
         assert not any(trunk in pair and pair & thighs for pair in bodies)
-        feet_down += int(filtered.feet_on_ground().sum())
+        feet_down += int(contacts_now(env).feet[0].sum())
         if terminated or truncated:
-            env.reset()
+            env.reset_row(0)
     assert feet_down > 200  # the feet meet the floor (about 2 of 4 down on average)
 
     env.reset(seed=0)
     data.qpos[2], data.qpos[3:7] = 0.04, [0.0, 1.0, 0.0, 0.0]  # upside down, the trunk on the floor
     mujoco.mj_forward(model, data)
-    _, body_contacts = filtered._contacts()
-    assert body_contacts > 0
-    _, _, terminated, _, info = env.step(np.zeros(12))
-    assert terminated and info["termination"] == "contact: trunk"
+    assert contacts_now(env).body[0] > 0
+    terminated = step(env, np.zeros(12))[2]
+    assert terminated and env.task.termination(0) == "contact: trunk"
 
 
 def test_the_filter_keeps_the_model_s_pairs_and_its_visual_geoms():
@@ -123,8 +135,8 @@ def test_the_filter_changes_nothing_where_the_robot_never_touches_itself():
         rng = np.random.default_rng(3)
         trace = []
         for _ in range(50):
-            observation, reward, terminated, truncated, _ = env.step(np.clip(0.4 * rng.normal(size=12), -1, 1))
-            trace.append(np.concatenate([observation, [reward], env.unwrapped.feet_on_ground()]))
+            observation, reward, terminated, truncated = step(env, np.clip(0.4 * rng.normal(size=12), -1, 1))
+            trace.append(np.concatenate([observation, [reward], contacts_now(env).feet[0]]))
             if terminated or truncated:
                 break
         runs.append(np.array(trace))
@@ -138,12 +150,12 @@ def test_the_physics_step_is_the_rule_s_and_a_given_one_wins():
     from ppo_torchrl.robots.model import read_robot
     from ppo_torchrl.robots.recipe import physics_dt
 
-    env = go1().unwrapped
+    env = go1()
     legged = compose(["experiment=legged_trot_v2", f"env.xml_file={GO1}"]).env.legged
-    assert env.model.opt.timestep == pytest.approx(physics_dt(read_robot(GO1), legged))
-    assert env.model.opt.timestep * env.frame_skip == pytest.approx(0.02)
-    given = go1("env.legged.physics_dt=0.004").unwrapped
-    assert given.model.opt.timestep == pytest.approx(0.004) and given.frame_skip == 5
+    assert env.models[0].opt.timestep == pytest.approx(physics_dt(read_robot(GO1), legged))
+    assert env.models[0].opt.timestep * env.world.frame_skip == pytest.approx(0.02)
+    given = go1("env.legged.physics_dt=0.004")
+    assert given.models[0].opt.timestep == pytest.approx(0.004) and given.world.frame_skip == 5
     assert given.dt == pytest.approx(0.02)
 
 
@@ -172,7 +184,7 @@ def test_the_rule_keeps_each_bound_and_a_saved_run_keeps_its_model_s_step():
 
     from ppo_torchrl.compose import compose
     from ppo_torchrl.config import Config
-    from ppo_torchrl.envs import make_gym_env
+    from ppo_torchrl.envs import make_batch
     from ppo_torchrl.robots.model import read_robot
     from ppo_torchrl.robots.recipe import DAMPING_STEP, SERVO_PHASE, rule_dt
 
@@ -190,7 +202,7 @@ def test_the_rule_keeps_each_bound_and_a_saved_run_keeps_its_model_s_step():
     saved = OmegaConf.create(OmegaConf.to_container(cfg))  # as a run dir's config.yaml is read back
     del saved.env.legged["physics_dt"]
     old = OmegaConf.merge(OmegaConf.structured(Config), saved)  # config.run_config's merge
-    assert make_gym_env(old.env).unwrapped.model.opt.timestep == pytest.approx(read_robot(GO1).timestep)
+    assert make_batch(old.env).models[0].opt.timestep == pytest.approx(read_robot(GO1).timestep)
 
 
 @pytest.mark.parametrize("override, expected", [
@@ -206,54 +218,70 @@ def test_a_bad_contacts_or_physics_step_is_one_error_line_and_exit_2(override, e
     assert not (tmp_path / "run").exists()
 
 
+def weighted(batch, name: str, **given) -> float:
+    """Row 0's weighted term `name` on the batch's own constants and the state given (rewards.py: a pure function)."""
+    from ppo_torchrl.tasks.locomotion.rewards import TERMS, Step
+
+    from test_joystick import crafted
+
+    step = crafted(params=batch.task.params, **given)
+    assert isinstance(step, Step)
+    return float(TERMS[name].fn(step)[0] * batch.task.weights[batch.task.names.index(name)])
+
+
 def test_a_swing_held_past_its_limit_costs_in_proportion_to_the_feet_held():
     """Recipe v2's gait lever: env.legged.long_swing_cost_weight x the share of feet in the air for longer than
     long_swing_limit x sqrt(l / g) (0.42 s for Go1); a foot down, or up for less, costs nothing."""
     import math
 
-    env = go1("env.legged.long_swing_cost_weight=0.8").unwrapped
+    env = go1("env.legged.long_swing_cost_weight=0.8")
     env.reset(seed=0)
-    env.step(np.zeros(env.action_space.shape))
-    assert env._swing_limit == pytest.approx(2.0 * math.sqrt(0.4260 / 9.81), rel=1e-3)
-    env._contacts = lambda: (np.array([False, False, True, True]), 0)  # LF and RF up
-    env._air_time = np.array([env._swing_limit, 0.1, 0.0, 0.0])  # LF up for the limit already, RF briefly
-    _, terms = env._legged_terms(np.zeros(env.action_space.shape))
-    assert terms["reward_long_swing"] == pytest.approx(-0.8 * 1 / 4)
-    plain = go1("env.legged.long_swing_cost_weight=0").unwrapped  # the lever off (recipe v2 sets it to 0.5)
-    plain.reset(seed=0)
-    assert "reward_long_swing" not in plain.step(np.zeros(env.action_space.shape))[4]
+    step(env, np.zeros(12))
+    limit = env.task.params["long_swing_limit"]
+    assert limit == pytest.approx(2.0 * math.sqrt(0.4260 / 9.81), rel=1e-3)
+    up = np.array([[False, False, True, True]] * 2)  # LF and RF up
+    air = np.array([[limit, 0.1, 0.0, 0.0]] * 2)  # LF up for the limit already, RF briefly
+    assert weighted(env, "long_swing", feet=up, air_time=air) == pytest.approx(-0.8 * 1 / 4)
+    assert "long_swing" not in go1("env.legged.long_swing_cost_weight=0").task.names  # the lever off (v2: 0.5)
 
 
 def test_a_foot_against_the_steps_riser_is_a_stumble_and_a_foot_on_its_top_is_not():
     """Recipe v3's candidate C3: env.legged.stumble_cost_weight x the share of feet touching the ground or the step on a
     face more than 45 degrees from level. A Go1 pushed 5 mm into the step's riser pays for the fore feet that touch it;
     standing on the floor, or with a fore foot on the step's top, it pays nothing; the lever off, no such term."""
-    env = go1("env.legged.stumble_cost_weight=2.0").unwrapped
+    from ppo_torchrl.tasks.locomotion.sensors import Contacts
+    from ppo_torchrl.tasks.locomotion.world import FOOT
+
+    env = go1("env.legged.stumble_cost_weight=2.0")
     env.reset(seed=0)
-    env._place_step(0.1, 1.0)
+    w, model, data, terrain = env.world, env.models[0], env.datas[0], env.task.terrain
+    fresh = Contacts(1, w, faces=True)
+    terrain.place(0, 0.1, 1.0, model)
     for _ in range(10):  # settle onto the floor
-        env.step(np.zeros(env.action_space.shape))
-    assert not env.feet_on_a_face().any() and env.feet_on_ground().sum() >= 2
-    feet, radius = env.data.geom_xpos[env.feet], env.model.geom_size[env.feet, 0]
-    env.data.qpos[0] += env.step_edge - (feet[:, 0] + radius).max() + 0.005
-    mujoco.mj_forward(env.model, env.data)
-    stumbling = env.feet_on_a_face()
-    assert stumbling.any() and {env.foot_corners[i] for i in np.flatnonzero(stumbling)} <= {"LF", "RF"}
-    _, terms = env._legged_terms(np.zeros(env.action_space.shape))
-    assert terms["reward_stumble"] == pytest.approx(-2.0 * np.count_nonzero(stumbling) / 4)
+        step(env, np.zeros(12))
+    fresh.read(0, data)
+    assert not fresh.on_face[0].any() and fresh.feet[0].sum() >= 2
+    feet, radius = data.geom_xpos[w.feet], model.geom_size[w.feet, 0]
+    data.qpos[0] += terrain.edge[0] - (feet[:, 0] + radius).max() + 0.005
+    mujoco.mj_forward(model, data)
+    fresh.read(0, data)
+    stumbling = fresh.on_face[0].copy()
+    assert stumbling.any() and {w.corners[i] for i in np.flatnonzero(stumbling)} <= {"LF", "RF"}
+    assert weighted(env, "stumble", on_face=np.stack([stumbling] * 2)) == pytest.approx(
+        -2.0 * np.count_nonzero(stumbling) / 4)
 
     env.reset(seed=0)
-    mujoco.mj_forward(env.model, env.data)
-    feet = env.data.geom_xpos[env.feet]
-    fore = [i for i, corner in enumerate(env.foot_corners) if corner.endswith("F")]
-    env._place_step((feet[fore, 2] - radius[fore]).min() + 0.004, feet[fore, 0].min() - env._start_along - 0.05)
-    mujoco.mj_forward(env.model, env.data)
-    partners, kinds = env.ground_contacts()
-    on_top = [g for g in partners[kinds == 2] if env.data.geom_xpos[g, 0] > env.step_edge]
-    assert on_top and not env.feet_on_a_face().any()
-    plain = go1().unwrapped  # recipe v2: the lever off
-    plain.reset(seed=0)
-    assert "reward_stumble" not in plain.step(np.zeros(plain.action_space.shape))[4]
+    mujoco.mj_forward(model, data)
+    feet = data.geom_xpos[w.feet]
+    fore = [i for i, corner in enumerate(w.corners) if corner.endswith("F")]
+    terrain.place(0, (feet[fore, 2] - radius[fore]).min() + 0.004,
+                  feet[fore, 0].min() - terrain._start_along - 0.05, model)
+    mujoco.mj_forward(model, data)
+    partners, _ = fresh.partners(data)
+    on_top = [g for g in partners[w.kind[partners] == FOOT] if data.geom_xpos[g, 0] > terrain.edge[0]]
+    fresh.read(0, data)
+    assert on_top and not fresh.on_face[0].any()
+    assert "stumble" not in go1().task.names  # recipe v2: the lever off
 
 
 def test_the_eval_step_a_video_films_is_the_sweeps_step_to_the_micrometre():

@@ -10,7 +10,7 @@ import pytest
 import torch
 
 from ppo_torchrl import checkpoint
-from ppo_torchrl.envs import ASSETS_DIR, make_gym_env
+from ppo_torchrl.envs import ASSETS_DIR, make_batch
 from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.trainer import Trainer
 from conftest import compose_config, run_cli
@@ -26,9 +26,9 @@ def test_mjcf_runs_a_model_it_was_not_tuned_for(tiny_cfg, tmp_path):
     """Gymnasium's own ant.xml through env=mjcf: the model file, not Ant-v5's built-in one, is loaded."""
     cfg = tiny_cfg("env=mjcf", f"env.xml_file={GYM_ANT_XML}", "env.locomotion.frame_skip=5",
                    "env.max_episode_steps=100")
-    env = make_gym_env(cfg.env)
-    assert Path(env.unwrapped.fullpath) == GYM_ANT_XML.resolve() and env.unwrapped.frame_skip == 5
-    assert env.observation_space.shape == (27,) and env.action_space.shape == (8,)  # no contact forces
+    env = make_batch(cfg.env)
+    assert Path(env.world.xml_file) == GYM_ANT_XML.resolve() and env.world.frame_skip == 5
+    assert env.single_observation_space.shape == (27,) and env.single_action_space.shape == (8,)  # no contact forces
     summary = Trainer(cfg, tmp_path).train()
     assert summary["env"] == "mjcf:ant.xml" and summary["frames"] == 512
     assert "forward_velocity_mean" in summary
@@ -36,7 +36,7 @@ def test_mjcf_runs_a_model_it_was_not_tuned_for(tiny_cfg, tmp_path):
 
 def test_mjcf_without_a_model_file_is_an_error():
     with pytest.raises(ConfigError, match="needs the robot's model file"):
-        make_gym_env(compose_config(["env=mjcf"]).env)
+        make_batch(compose_config(["env=mjcf"]).env)
 
 
 @pytest.mark.parametrize("content, message", [
@@ -49,7 +49,7 @@ def test_bad_model_files_are_one_line_errors(tmp_path, content, message):
     if content is not None:
         path.write_text(content)
     with pytest.raises(ConfigError, match=message):
-        make_gym_env(compose_config(["env=mjcf", f"env.xml_file={path}"]).env)
+        make_batch(compose_config(["env=mjcf", f"env.xml_file={path}"]).env)
 
 
 def test_bad_model_file_on_the_command_line_exits_2_with_one_line(tmp_path):
@@ -77,9 +77,9 @@ def test_quadruped_model_is_a_19kg_12dof_robot_that_stands():
 
 def test_step_model_has_a_15cm_step_ahead(tiny_cfg):
     """The model file's own step (what runs made before env.terrain see): 15 cm, 2 m ahead."""
-    env = make_gym_env(tiny_cfg("env=mjcf", "env.xml_file=quadruped_step.xml", "env.locomotion.main_body=trunk").env)
+    env = make_batch(tiny_cfg("env=mjcf", "env.xml_file=quadruped_step.xml", "env.locomotion.main_body=trunk").env)
     env.reset(seed=0)
-    model, data = env.unwrapped.model, env.unwrapped.data
+    model, data = env.models[0], env.datas[0]
     step = model.geom("step")
     top = data.geom_xpos[step.id][2] + model.geom_size[step.id][2]
     edge = data.geom_xpos[step.id][0] - model.geom_size[step.id][0]
