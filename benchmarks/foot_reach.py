@@ -14,13 +14,13 @@ import sys
 import mujoco
 
 from ppo_torchrl.compose import compose
-from ppo_torchrl.envs import make_gym_env
+from ppo_torchrl.envs import make_batch
 
 
 def main(model_file: str, overrides: list) -> None:
     cfg = compose(["experiment=legged_trot", f"env.xml_file={model_file}", *overrides])
-    env = make_gym_env(cfg.env).unwrapped
-    model, data, robot = env.model, mujoco.MjData(env.model), env.robot
+    world = make_batch(cfg.env, 1).world  # the batch's compiled model and what the task reads of it (world.py)
+    model, data, robot = world.model, mujoco.MjData(world.model), world.robot
     joints = [int(model.actuator_trnid[a, 0]) for a in range(model.nu)]
     leg_root = model.jnt_bodyid[joints[0]]  # the first leg: the actuators on the first joint's subtree
 
@@ -32,8 +32,8 @@ def main(model_file: str, overrides: list) -> None:
         return False
 
     leg = [a for a, j in enumerate(joints) if on_leg(model.jnt_bodyid[j])]
-    foot = next(int(f) for f in env.feet if on_leg(model.geom_bodyid[f]))
-    scales = env._ctrl_per_action / model.actuator_gear[:, 0]
+    foot = next(int(f) for f in world.feet if on_leg(model.geom_bodyid[f]))
+    scales = world.ctrl_per_action / model.actuator_gear[:, 0]
     data.qpos[:] = robot.qpos
     mujoco.mj_kinematics(model, data)
     standing = data.geom_xpos[foot][2]

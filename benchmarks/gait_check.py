@@ -1,6 +1,6 @@
 """Which gait does a legged run's policy use, and do its foot contacts read right? For each run dir, on flat ground,
 deterministic episodes of its checkpoint through the Python API (`ppo_torchrl.load`, normalization frozen) on its
-eval env, read after every control step as the sweeps read them:
+eval env (a batch of one row, envs.make_batch), read after every control step as the sweeps read them:
 - the share of steps with 0, 1, 2, 3 and 4 feet down, and with each foot pattern that names a gait: both diagonal
   feet of one pair down and the other pair up (a trot), both feet of one side (a pace), both fore or both hind (a
   bound); 0 feet down is flight, 4 a pronk's stance;
@@ -26,8 +26,10 @@ from cli_args import ConfigError, Parser, existing_dir, out_file, positive_int, 
 from cli_args import run as run_main
 
 import ppo_torchrl
-from ppo_torchrl.envs import episode_seeds, make_gym_env
+from ppo_torchrl.envs import episode_seeds, make_batch
 from ppo_torchrl.robots.gait import CORNERS, FOOT_PAIRS
+from ppo_torchrl.tasks.locomotion.sensors import Contacts
+from ppo_torchrl.tasks.locomotion.world import FOOT, NON_FOOT, OTHER
 
 PATTERNS = {"trot": "diagonal", "pace": "same_side", "bound": "same_end"}  # one pair down, the other pair up
 
@@ -45,26 +47,27 @@ def check(run: Path, seed: int, episodes: int, policy=None) -> dict:
     policy = policy or legged_policy(run)
     env_cfg = policy.config.env
     env_cfg.terrain.step_height = 0.0
-    env = make_gym_env(env_cfg, evaluation=True)
-    robot = env.unwrapped
-    corners = robot.foot_corners or list(CORNERS)
+    batch = make_batch(env_cfg, 1, evaluation=True)  # one row: the episodes one after another, as evaluate's seeds
+    world, data = batch.world, batch.datas[0]
+    sensor = Contacts(1, world)
+    corners = list(world.corners or CORNERS)
     pairs = {gait: [[corners.index(c) for c in pair] for pair in FOOT_PAIRS[kind]] for gait, kind in PATTERNS.items()}
-    foot_body = robot.model.geom_bodyid[robot.feet]
+    foot_body = world.model.geom_bodyid[world.feet]
     down, body_down, touching, heights = [], [], {"feet": 0, "foot bodies' other geoms": 0, "other bodies": 0}, []
     for s in episode_seeds(seed, episodes):
-        observation, _ = env.reset(seed=s)
+        observation, _ = batch.reset(seed=s)
         while True:
-            observation, _, terminated, truncated, _ = env.step(policy.predict(observation))
-            partners, kinds = robot.ground_contacts()  # one reading of the contacts per step, as feet_on_ground's
-            down.append(np.isin(robot.feet, partners))
-            kinds = set(kinds.tolist())
-            body_down.append(np.isin(foot_body, robot.model.geom_bodyid[partners]))
-            for kind, name in ((2, "feet"), (0, "foot bodies' other geoms"), (3, "other bodies")):
+            observation, _, terminated, truncated, _ = batch.step(policy.predict(observation))
+            partners, _ = sensor.partners(data)  # the geoms on the terrain after the step, as the sweeps read them
+            down.append(np.isin(world.feet, partners))
+            kinds = set(world.kind[partners].tolist())
+            body_down.append(np.isin(foot_body, world.model.geom_bodyid[partners]))
+            for kind, name in ((FOOT, "feet"), (OTHER, "foot bodies' other geoms"), (NON_FOOT, "other bodies")):
                 touching[name] += kind in kinds
-            heights.append(float(robot.get_body_com(robot.robot.trunk)[2]))
-            if terminated or truncated:
+            heights.append(float(data.xpos[world.trunk][2]))
+            if terminated[0] or truncated[0]:
                 break
-    env.close()
+    batch.close()
     down = np.array(down)
     n = len(down)
     row = {"run": run.name, "steps": n, "feet": " ".join(corners)}
@@ -74,7 +77,7 @@ def check(run: Path, seed: int, episodes: int, policy=None) -> dict:
         other = down[:, b].all(1) & ~down[:, a].any(1)
         row[gait] = float(np.mean(one | other))
     row.update({f"touching: {k}": v / n for k, v in touching.items()})
-    l = robot.robot.leg_length
+    l = world.robot.leg_length
     row["trunk height / l (min mean max)"] = " ".join(f"{h / l:.2f}" for h in (min(heights), np.mean(heights),
                                                                                max(heights)))
     row["each foot down"] = " ".join(f"{x:.2f}" for x in down.mean(0))

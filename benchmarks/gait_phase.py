@@ -19,8 +19,9 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type
 warnings.filterwarnings("ignore")
 
 from ppo_torchrl.checkpoint import load_policy  # noqa: E402
-from ppo_torchrl.envs import make_gym_env  # noqa: E402
+from ppo_torchrl.envs import make_batch  # noqa: E402
 from ppo_torchrl.normalization import make_observation_normalizer  # noqa: E402
+from ppo_torchrl.tasks.locomotion.sensors import Contacts  # noqa: E402
 
 BINS = 12
 
@@ -36,29 +37,30 @@ def main() -> None:
     cfg.env.terrain.step_height = args.height
     normalizer = make_observation_normalizer(cfg.env.transforms, len(state["normalization"]["obs"]["mean"]),
                                              state["normalization"]["obs"], frozen=True)
-    env = make_gym_env(cfg.env, evaluation=True)
-    robot = env.unwrapped
-    if robot.clock_phase() is None:
+    batch = make_batch(cfg.env, 1, evaluation=True)  # one row (tasks/locomotion/batch.py)
+    task, world = batch.task, batch.world
+    sensor = Contacts(1, world)
+    if task.clock_phase() is None:
         raise SystemExit("error: this run has no trot clock (env.locomotion.gait_period)")
-    down, steps, match = np.zeros((BINS, len(robot.feet))), np.zeros(BINS), []
-    obs, _ = env.reset(seed=args.seed)
-    for _ in range(cfg.env.max_episode_steps or 1000):
-        phase, meant = robot.clock_phase(), robot.feet_meant_down()
-        x = torch.as_tensor(normalizer(obs[None], update=False), dtype=torch.float32)[0]
+    down, steps, match = np.zeros((BINS, len(world.feet))), np.zeros(BINS), []
+    obs, _ = batch.reset(seed=args.seed)
+    for _ in range(batch.max_steps):
+        phase, meant = float(task.clock_phase()[0]), task.meant_down()[0]
+        x = torch.as_tensor(normalizer(obs, update=False), dtype=torch.float32)[0]
         with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
             action = ac.actor(TensorDict({"observation": x}, []))["action"]
-        obs, _, terminated, truncated, _ = env.step(action.numpy())
-        feet = robot.feet_on_ground()
+        obs, _, terminated, truncated, _ = batch.step(action.numpy()[None])
+        feet = np.isin(world.feet, sensor.partners(batch.datas[0])[0])  # each foot on the terrain after the step
         b = int(phase * BINS)
         down[b] += feet
         steps[b] += 1
         match.append(float((feet == meant).mean()))
-        if terminated or truncated:
+        if terminated[0] or truncated[0]:
             break
     print(f"{args.run} ({args.checkpoint}), step {args.height:.2f} m, episode seed {args.seed}: {len(match)} steps, "
           f"clock period {cfg.env.locomotion.gait_period} s; share of feet matching the clock: {np.mean(match):.3f}")
-    print("| phase bin | " + " | ".join(robot.foot_corners) + " |")
-    print("|---|" + "---|" * len(robot.feet))
+    print("| phase bin | " + " | ".join(world.corners or world.foot_names) + " |")
+    print("|---|" + "---|" * len(world.feet))
     for b in range(BINS):
         print(f"| {b} | " + " | ".join(f"{v:.2f}" for v in down[b] / max(steps[b], 1)) + " |")
 

@@ -10,21 +10,21 @@ import numpy as np
 from hydra import compose, initialize_config_dir
 
 import ppo_torchrl.config  # noqa: F401  (registers the schemas)
-from ppo_torchrl.envs import ASSETS_DIR, make_gym_env
+from ppo_torchrl.envs import ASSETS_DIR, make_batch
 
 CONF = str(Path(__file__).resolve().parents[1] / "conf")
 
 for name, xml in (("quadruped", "quadruped.xml"), ("quadruped_a1like", "quadruped_a1like.xml")):
     with initialize_config_dir(config_dir=CONF, version_base="1.3"):
-        env = make_gym_env(compose(config_name="config", overrides=[f"env={name}"]).env)
-    loco = env.unwrapped
-    env.reset(seed=0)
+        batch = make_batch(compose(config_name="config", overrides=[f"env={name}"]).env)  # one row
+    loco = batch.world
+    batch.reset(seed=0)
     rng, top = np.random.default_rng(0), np.zeros(12)
     for _ in range(200):
-        _, _, terminated, _, _ = env.step(rng.uniform(-1, 1, 12).astype(np.float32))
-        top = np.maximum(top, np.abs(loco.data.qpos[7:]))
-        if terminated:
-            env.reset()
+        _, _, terminated, _, _ = batch.step(rng.uniform(-1, 1, (1, 12)).astype(np.float32))
+        top = np.maximum(top, np.abs(batch.datas[0].qpos[7:]))
+        if terminated[0]:
+            batch.reset()
     model = mujoco.MjModel.from_xml_path(str(ASSETS_DIR / xml))
     model.actuator_gainprm[:, 0] = 0  # actuators off
     model.actuator_biasprm[:, 1:3] = 0

@@ -18,24 +18,24 @@ import sys
 import numpy as np
 
 from ppo_torchrl.compose import compose
-from ppo_torchrl.envs import make_gym_env
+from ppo_torchrl.envs import make_batch
 
 
 def main(model: str, overrides: list, episodes: int = 20) -> None:
     cfg = compose(["experiment=legged_trot", f"env.xml_file={model}", "env.terrain.curriculum=false", *overrides])
-    env = make_gym_env(cfg.env)
+    batch = make_batch(cfg.env, 1)  # one row (tasks/locomotion/batch.py)
     std = math.exp(cfg.policy.log_std_init) + cfg.policy.std_min
     rng = np.random.default_rng(0)
     lengths, ends = [], collections.Counter()
     for episode in range(episodes):
-        env.reset(seed=episode)
+        batch.reset(seed=episode)
         for n in range(1, 10**6):
-            _, _, terminated, truncated, _ = env.step(np.clip(std * rng.normal(size=env.action_space.shape), -1, 1))
-            if terminated or truncated:
+            _, _, terminated, truncated, _ = batch.step(np.clip(std * rng.normal(size=batch.action_space.shape), -1, 1))
+            if terminated[0] or truncated[0]:
                 lengths.append(n)
-                ends[str(env.unwrapped.termination)] += 1
+                ends[str(batch.task.termination(0))] += 1
                 break
-    scales = env.unwrapped._ctrl_per_action
+    scales = batch.world.ctrl_per_action
     print(f"{model}: {np.mean(lengths):.1f} control steps per episode (min {min(lengths)}), ends {dict(ends)}, "
           f"action scale {scales.min():.3f}-{scales.max():.3f} rad, std {std:.2f}")
 

@@ -79,7 +79,7 @@ class RandomizeConfig:
 
 @dataclass
 class LocomotionConfig:
-    """An MJCF locomotion env (env=mjcf; robots/env.py): Gymnasium Ant-v5's reward and termination knobs,
+    """An MJCF locomotion env (env=mjcf; tasks/locomotion/): Gymnasium Ant-v5's reward and termination knobs,
     then heading, actuator limits and legged-locomotion reward terms (defaults: off, Ant-v5's behaviour)."""
 
     forward_reward_weight: float = 1.0  # x velocity of main_body, m/s
@@ -101,7 +101,7 @@ class LocomotionConfig:
     heading: str = "x"
     # The forward reward counts speed up to this (m/s) and no more; null: all of it (Gymnasium's).
     target_speed: Optional[float] = None
-    # Actuators (each must drive a joint; null: as the model file has them). robots/env.py explains the choice.
+    # Actuators (each must drive a joint; null: as the model file has them). tasks/locomotion/world.py explains the choice.
     torque_limit: Optional[float] = None  # N m: every actuator's peak joint torque (its forcerange)
     # rad/s: the drive's torque-speed line, net driving torque <= torque_limit x (1 - speed / this):
     # joint damping of torque_limit / joint_speed_limit on each actuated joint (a motor's back-EMF,
@@ -160,7 +160,7 @@ class LocomotionConfig:
 
 @dataclass
 class TerrainConfig:
-    """The step of a step env, set per episode, and what the policy perceives (robots/terrain.py).
+    """The step of a step env, set per episode, and what the policy perceives (tasks/locomotion/terrain.py).
 
     Step keys need a model with a body named `step` holding one box geom (env=quadruped_step); with
     none of them set the step stays where the model file puts it. The observation keys work on any model.
@@ -246,7 +246,7 @@ class LeggedConfig:
     step_distance: List[float] = field(default_factory=lambda: [2.0, 4.0])  # x l: the step's edge from the start
     success_margin: float = 1.0  # x l beyond the edge: crossed
     height_sample_spacing: float = 0.2  # x l
-    # How each part of the observation is scaled (layout.py; robots/env.py, observation_layout). segments:
+    # How each part of the observation is scaled (layout.py; tasks/locomotion/task.py, LeggedTask.layout). segments:
     # proprioception by the running statistics, the contact flags and the trot clock as they are, the terrain
     # heights relative to the trunk's standing height in l with a fixed clip, so a step reads its height whatever
     # the curriculum showed (conf/env/legged.yaml sets it). whole: one running normalization over everything,

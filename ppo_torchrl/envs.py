@@ -1,6 +1,7 @@
 """Environments: checking an id, the raw Gymnasium env, and the TorchRL `TransformedEnv`.
 
-- `make_gym_env` gives the real Gymnasium MuJoCo env;
+- `make_gym_env` gives the real Gymnasium MuJoCo env; `make_batch` the batched env of a robot read from its model
+  file (env=legged, env=mjcf, the in-house quadruped presets: tasks/locomotion/batch.py);
 - `make_torchrl_env` gives `TransformedEnv(GymWrapper(...))` with the transforms: the one env of every
   path (TorchRL's Collector steps it, the fast collector steps its Gymnasium envs with its transforms'
   statistics, evaluation runs it with frozen statistics).
@@ -130,9 +131,9 @@ def env_checks(env_cfg) -> list:
     """env.legged's checks, then the locomotion and terrain checks on the values its recipe gives the robot
     (env=legged; any other env's as they are): training and evaluate's env.<key>=<value> check one way (a
     legged run's saved config leaves the derived keys, such as the curriculum's height range, to the recipe)."""
-    from ppo_torchrl.robots.env import locomotion_checks
     from ppo_torchrl.robots.recipe import legged_checks
-    from ppo_torchrl.robots.terrain import terrain_checks
+    from ppo_torchrl.tasks.locomotion.checks import locomotion_checks
+    from ppo_torchrl.tasks.locomotion.terrain import terrain_checks
 
     legged = legged_checks(env_cfg.get("legged"))
     if not all(ok for ok, _ in legged):  # the recipe cannot scale bad targets
@@ -240,7 +241,7 @@ def tracking_camera(env_id: str) -> dict:
     """The gym.make kwargs of a video that follows the robot. Gymnasium's MuJoCo models carry a `track` camera
     on the torso in trackcom mode (Hopper, Walker2d, HalfCheetah, Ant, Humanoid), but Gymnasium 1.x renders from
     a free camera that stays where the episode began unless the camera is named. A MuJoCo env without one falls
-    back to that free camera; other envs take no camera. (MJCF robots: robots/env.py adds `track` when missing.)"""
+    back to that free camera; other envs take no camera. (MJCF robots: tasks/locomotion/filming.py adds `track` when missing.)"""
     from gymnasium.envs.registration import load_env_creator
 
     try:
@@ -257,13 +258,10 @@ def make_gym_env(env_cfg, render_mode: Optional[str] = None, evaluation: bool = 
         from ppo_torchrl.envs_playground import make_playground_env
 
         return make_playground_env(env_cfg, render_mode, **render_kwargs)
+    if batched(env_cfg):  # a robot of a model file is a batch of rows (tasks/locomotion/batch.py), never one env
+        raise ValueError(f"env {env_label(env_cfg)} is a batched env: envs.make_batch(env_cfg, num_envs) builds it")
     kwargs = gym_make_kwargs(env_cfg, render_mode, evaluation, **render_kwargs)
     env_id = env_cfg.id
-    if env_cfg.get("xml_file"):  # an MJCF robot: Ant-v5's class with robots/env.py's additions
-        from ppo_torchrl.robots.env import LOCOMOTION_ID, register
-
-        register()
-        env_id = LOCOMOTION_ID
     # The passive checker re-validates every step; the id is checked once above instead.
     try:
         env = gym.make(env_id, disable_env_checker=True, **kwargs)
@@ -274,8 +272,6 @@ def make_gym_env(env_cfg, render_mode: Optional[str] = None, evaluation: bool = 
         raise ConfigError(f"cannot make env '{env_cfg.id}': {type(exc).__name__}: {first}") from None
     if render_mode is not None:
         floor_to_the_horizon(env.unwrapped)
-    if env_cfg.get("xml_file") and env_cfg.get("legged") is None:  # env=legged acts in [-1, 1] (robots/env.py)
-        _ctrl_bounds_from_force(env, check_mjcf(resolve_model_file(env_cfg.xml_file)))
     if not isinstance(env.action_space, gym.spaces.Box):
         raise ConfigError(
             f"env '{env_cfg.id}' has a {type(env.action_space).__name__} action space; "
@@ -287,18 +283,6 @@ def make_gym_env(env_cfg, render_mode: Optional[str] = None, evaluation: bool = 
         with np.errstate(over="ignore"):  # gymnasium's Box compares the float32 bounds in float64: no overflow here
             env = gym.wrappers.DtypeObservation(env, np.float64)  # sees float64 observations, as MuJoCo's envs give
     return env
-
-
-def _ctrl_bounds_from_force(env: gym.Env, info: MjcfInfo) -> None:
-    """Actuators without a ctrlrange get forcerange / gear as control bounds (and the action space)."""
-    if not info.ctrl_from_force:
-        return
-    model = env.unwrapped.model
-    for i, low, high in info.ctrl_from_force:
-        model.actuator_ctrllimited[i] = 1
-        model.actuator_ctrlrange[i] = (low, high)
-    bounds = model.actuator_ctrlrange.astype(np.float32)  # what MujocoEnv makes its action space of
-    env.unwrapped.action_space = gym.spaces.Box(low=bounds[:, 0], high=bounds[:, 1], dtype=np.float32)
 
 
 def extra_transforms(env_cfg) -> list:
@@ -448,7 +432,7 @@ def make_torchrl_env(
         raise ValueError("a frozen observation normalization needs obs_stats")
     # each segment of the observation scaled as the env declares it (layout.py; one running segment by default)
     obs_norm = make_observation_normalizer(t, obs_dim, obs_stats, frozen=not train, seed=0 if seed is None else seed,
-                                           fit_env=functools.partial(make_gym_env, env_cfg) if train else None,
+                                           fit_env=functools.partial(make_batch if batched(env_cfg) else make_gym_env, env_cfg) if train else None,
                                            layout=rows.layout())
     reward_norm = make_reward_normalizer(t, num_envs, gamma) if train else None
     privileged_layout = rows.privileged_layout() if privileged else None

@@ -15,7 +15,7 @@ An env that declares nothing (Gymnasium's MuJoCo envs) is one running segment ov
 checkpoint's statistics without a layout (a run saved before issue 59): the normalization every earlier
 run trained and is evaluated with, bit for bit.
 
-Who does what: the env declares its segments (`observation_layout()`; robots/env.py for the legged env),
+Who does what: the env declares its segments (`observation_layout()`; tasks/locomotion/task.py, LeggedTask.layout, for the legged env),
 `ObservationNormalizer` (normalization.py) turns them into per-element vectors once (`vectors`) and keeps
 the statistics; the layout travels with them (`to_state`, in a checkpoint's "obs") to evaluation and
 export, which bakes the same vectors. So a change of one segment's treatment is the env's declaration
@@ -36,7 +36,7 @@ WHOLE = "observation"  # the one segment of an env that declares none
 # statistics of its own): an env declares it with `privileged_layout()` (envs_playground.py's tasks do)
 PRIVILEGED = "privileged_observation"
 # env.legged.obs_layout (config.py): whole, the default (one running segment: runs saved before the key), or the
-# env's own segments (robots/env.py, observation_layout)
+# env's own segments (tasks/locomotion/task.py, LeggedTask.layout)
 OBS_LAYOUTS = ("whole", "segments")
 
 

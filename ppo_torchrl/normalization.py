@@ -201,12 +201,14 @@ class ObservationNormalizer:
         return np.where(running, mean, offset), np.where(running, scale, fixed_scale), bound
 
     def fit_fixed(self, gym_env, frames: int, seed: int) -> None:
-        """obs_norm=fixed: the moments of `frames` observations of random-action rollouts, then frozen."""
-        obs = [gym_env.reset(seed=seed)[0]]
+        """obs_norm=fixed: the moments of `frames` observations of random-action rollouts, then frozen. gym_env: one
+        Gymnasium env, or a batch of one row (envs.make_batch: a vector env, its arrays one row high)."""
+        dim = self.stats.mean.shape[-1]
+        obs = [np.reshape(gym_env.reset(seed=seed)[0], dim)]
         gym_env.action_space.seed(seed)
         for _ in range(frames - 1):
             o, _, term, trunc, _ = gym_env.step(gym_env.action_space.sample())
-            obs.append(gym_env.reset()[0] if term or trunc else o)
+            obs.append(np.reshape(gym_env.reset()[0] if np.any(term) or np.any(trunc) else o, dim))
         self.stats.update(np.stack(obs))
         self.freeze()
 

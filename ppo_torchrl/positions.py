@@ -33,8 +33,6 @@ def get_env_state(env: gym.Env) -> dict:
     """What a bit-exact continuation of this episode needs: the MuJoCo integration state
     (qpos, qvel, act, time, warm start), the time-limit counter, the env's RNG and the episode so far."""
     state = {"np_random": env.unwrapped.np_random.bit_generator.state}
-    if hasattr(env.unwrapped, "get_extra_state"):  # robots/env.py: the step, curriculum, last action, air times
-        state["extra"] = env.unwrapped.get_extra_state()
     limit = _find_wrapper(env, gym.wrappers.TimeLimit)
     if limit is not None:
         state["elapsed_steps"] = limit._elapsed_steps
@@ -69,8 +67,6 @@ def set_env_state(env: gym.Env, state: dict) -> None:
             raise ConfigError("the checkpoint's simulator state does not fit this env's model")
         mujoco.mj_setState(model, data, state["mujoco"], spec)
         mujoco.mj_forward(model, data)
-    if "extra" in state and hasattr(env.unwrapped, "set_extra_state"):
-        env.unwrapped.set_extra_state(state["extra"])
 
 
 class ResumableReset(gym.Wrapper):

@@ -125,7 +125,7 @@ def validate_config(cfg, keep_env: bool = False, build_env: bool = True):
 
     check_env(env)  # after the plain values: env=legged reads its model here
     if env.get("xml_file"):
-        from ppo_torchrl.robots.env import heading_angle
+        from ppo_torchrl.tasks.locomotion.world import heading_angle
 
         heading_angle(env.locomotion.heading)
     resolve_device(cfg.device)

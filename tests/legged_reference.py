@@ -4,7 +4,8 @@ equality tests hold the batch to that env after it is gone.
 
     python tests/legged_reference.py   # writes tests/data/legged_reference.npz and legged_reference_models.json
 
-It runs only on a checkout that still has robots/env.py (the commit that added this file). Each case steps the old env
+It runs only on a checkout that still has robots/env.py: f73badb, the commit that added this file (`git worktree add
+<dir> f73badb`, then this script there; robots/env.py went in the commit after the tests stopped needing it). Each case steps the old env
 under fixed actions (a seeded normal draw, clipped to [-1, 1]) for a fixed number of control steps, resetting it where
 an episode ends, and keeps what a platform cannot change and what a test needs to compare to tolerance: a digest of
 the physics state (qpos and qvel bytes: MuJoCo's arithmetic, no NumPy) after every step and reset, every reward, each

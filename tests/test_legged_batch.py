@@ -196,3 +196,23 @@ def test_an_interrupted_legged_run_resumed_logs_what_the_uninterrupted_one_logs(
 
     straight, resumed = rows(tmp_path / "straight"), rows(tmp_path / "cut")
     assert len(resumed) == 4 and resumed == straight
+
+
+def test_fixed_observation_statistics_are_fitted_on_a_one_row_batch_of_the_task():
+    """env.transforms.obs_norm=fixed on env=legged: the statistics are the moments of random-action rollouts of a
+    batch of one row of the task (envs.make_batch), reset where an episode ends, then frozen (a robot of a model file
+    has no single Gymnasium env to fit them on)."""
+    from ppo_torchrl.envs import make_batch, make_torchrl_env
+
+    cfg = legged_config(GO1, "env.transforms.obs_norm=fixed", "env.transforms.obs_norm_init_frames=300")
+    env = make_torchrl_env(cfg.env, clip_actions=True, gamma=0.99, seed=3)
+    norm = env.transform[0].obs_norm
+    batch = make_batch(cfg.env)
+    obs = [batch.reset(seed=3)[0][0]]
+    batch.action_space.seed(3)
+    for _ in range(299):
+        o, _, term, trunc, _ = batch.step(batch.action_space.sample())
+        obs.append(batch.reset()[0][0] if term[0] or trunc[0] else o[0])
+    assert norm.frozen
+    np.testing.assert_allclose(norm.stats.mean, np.mean(obs, axis=0), rtol=1e-9, atol=1e-12)
+    env.close()

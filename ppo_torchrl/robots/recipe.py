@@ -81,7 +81,7 @@ def in_metres(legs: float, leg_length: float) -> float:
 
 def derived_values(robot: Robot, legged) -> dict:
     """{'locomotion': {...}, 'terrain': {...}}: the values env.legged's targets take on this robot (with the env's
-    contacts and physics step, robots/env.py, which no other env reads)."""
+    contacts and physics step, tasks/locomotion/world.py, which no other env reads)."""
     l, speed, time = robot.leg_length, robot.speed_scale, robot.time_scale
     dt = physics_dt(robot, legged)
     weight_moment = robot.mass * GRAVITY * l  # N m

@@ -4,10 +4,12 @@ training run logs of it (`metrics`). A terrain kind is one class here with these
 
 `StepTerrain`: one box across each row's path (env.terrain: its height and distance drawn per episode from a
 range that a success-driven curriculum widens, a band under the curriculum's level, a share of flat episodes),
-each row with its own curriculum, as N envs of the locomotion env before the rebuild had (robots/terrain.py: the
+each row with its own curriculum, as N envs of the locomotion env before the rebuild had (robots/terrain.py, gone since: the
 same draws from the same RNG, so a row continues that env's stream). The step is moved in the row's own model
 (`body_pos`, no recompile). Heights are read along the heading, the box being 100 m wide; success is the trunk
-`success_margin` beyond the edge.
+`success_margin` beyond the edge. A model that has no step gets one at build time (`add_step`, MjSpec: no model file
+is edited), its box reaching below the floor, so any height from 0 to its depth is a solid step.
+`terrain_checks`: env.terrain's values, checked before anything is built (envs.env_checks).
 """
 
 from __future__ import annotations
@@ -15,9 +17,33 @@ from __future__ import annotations
 from collections import deque
 from typing import List
 
+import mujoco
 import numpy as np
 
 from ppo_torchrl.errors import ConfigError
+
+STEP_BODY = "step"  # terrain models: the static body that holds the step's box geom
+TERRAIN_STEP_KEYS = ("step_height", "step_height_range", "step_distance")
+STEP_WIDTH = 100.0  # m across the path: it cannot be walked around
+STEP_LENGTH = 20.0  # m along it: no episode walks off its far side
+
+
+def add_step(spec, height: float, distance: float, depth: float, heading) -> None:
+    """Adds the step (a body named `step` with one box geom) to a model being built (mujoco.MjSpec): its
+    edge `distance` ahead of the origin along `heading`, its top at `height`, its box `depth` deep (the
+    tallest step it can make), made of the floor's stuff: the contact type, affinity, friction, solver
+    parameters and material of the world's first plane geom (MuJoCo's defaults where there is none).
+    The terrain turns it to face the heading at reset (StepTerrain.draw)."""
+    floor = next((g for g in spec.worldbody.geoms if g.type == mujoco.mjtGeom.mjGEOM_PLANE), None)
+    half = np.array([STEP_LENGTH / 2, STEP_WIDTH / 2, depth / 2])
+    centre = (distance + half[0]) * np.asarray(heading, float)
+    body = spec.worldbody.add_body(name=STEP_BODY, pos=[centre[0], centre[1], height - half[2]])
+    geom = body.add_geom(name=STEP_BODY, type=mujoco.mjtGeom.mjGEOM_BOX, size=half, rgba=[0.45, 0.5, 0.55, 1])
+    if floor is not None:
+        geom.contype, geom.conaffinity, geom.condim = floor.contype, floor.conaffinity, floor.condim
+        geom.friction, geom.material = floor.friction, floor.material
+        geom.solref, geom.solimp, geom.priority = floor.solref, floor.solimp, floor.priority
+
 
 
 class FlatTerrain:
@@ -208,3 +234,43 @@ def ground_under(terrain, rows, xy: np.ndarray) -> np.ndarray:
     """The ground's height under one point per row ([len(rows), 2] -> [len(rows)])."""
     return terrain.height_at(rows, xy[:, None, :])[:, 0]
 
+
+def terrain_checks(terrain) -> list:
+    """env.terrain: heights >= 0, [min, max] ranges with min <= max, a threshold in (0, 1], counts >= 1."""
+    if terrain is None:
+        return []
+
+    def span(key, low_ok):
+        value = terrain.get(key)
+        if value is None:
+            return True, ""
+        value = list(value)
+        ok = len(value) == 2 and low_ok(value[0]) and value[0] <= value[1]
+        floor = "0 <= min" if key == "step_height_range" else "0 < min"
+        return ok, f"env.terrain.{key}={value} must be [min, max] with {floor} <= max (m)"
+
+    height, eval_height = terrain.get("step_height"), terrain.get("eval_step_height")
+    return [
+        (height is None or height >= 0, f"env.terrain.step_height={height} must be >= 0 (m)"),
+        (eval_height is None or eval_height >= 0, f"env.terrain.eval_step_height={eval_height} must be >= 0 (m)"),
+        span("step_height_range", lambda low: low >= 0),
+        span("step_distance", lambda low: low > 0),
+        (0 < terrain.curriculum_threshold <= 1,
+         f"env.terrain.curriculum_threshold={terrain.curriculum_threshold} must be in (0, 1]: a success rate"),
+        (terrain.curriculum_window >= 1, f"env.terrain.curriculum_window={terrain.curriculum_window} must be >= 1"),
+        (terrain.curriculum_step > 0, f"env.terrain.curriculum_step={terrain.curriculum_step} must be > 0 (m)"),
+        (terrain.curriculum_down_threshold is None or 0 <= terrain.curriculum_down_threshold < terrain.curriculum_threshold,
+         f"env.terrain.curriculum_down_threshold={terrain.curriculum_down_threshold} must be in "
+         f"[0, curriculum_threshold={terrain.curriculum_threshold}): a success rate"),
+        (terrain.get("curriculum_band") is None or terrain.curriculum_band > 0,
+         f"env.terrain.curriculum_band={terrain.get('curriculum_band')} must be > 0 (m) or null"),
+        (0 <= terrain.curriculum_band_share <= 1,
+         f"env.terrain.curriculum_band_share={terrain.curriculum_band_share} must be in [0, 1]: a share of episodes"),
+        (0 <= terrain.flat_share <= 1, f"env.terrain.flat_share={terrain.flat_share} must be in [0, 1]: a share of episodes"),
+        (not terrain.curriculum or terrain.step_height_range is not None,
+         "env.terrain.curriculum=true needs env.terrain.step_height_range=[min, max] to widen"),
+        (terrain.success_margin >= 0, f"env.terrain.success_margin={terrain.success_margin} must be >= 0 (m)"),
+        (terrain.height_samples >= 0, f"env.terrain.height_samples={terrain.height_samples} must be >= 0"),
+        (terrain.height_sample_spacing > 0,
+         f"env.terrain.height_sample_spacing={terrain.height_sample_spacing} must be > 0 (m)"),
+    ]

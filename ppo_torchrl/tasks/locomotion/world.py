@@ -2,7 +2,7 @@
 the facts read from it that every part of the task shares (ids, the drives' control mapping, the feet).
 
 `build_world` takes the env's keyword arguments (envs.gym_make_kwargs: the recipe already scaled to the robot) and
-makes the model exactly as the locomotion env before the rebuild did (robots/env.py, kept for env=mjcf): the step
+makes the model exactly as the locomotion env before the rebuild did (robots/env.py, gone since; tests/legged_reference.py): the step
 added and the robot's contacts filtered at build time (MjSpec; no model file is written), the physics step set,
 torque motors made PD servos around the standing pose, the robustness world's friction and trunk mass, and the
 step box turned to face the heading. Each row of the batch steps its own copy of this model (`row_model`): the
@@ -21,7 +21,7 @@ import numpy as np
 
 from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.robots.model import Robot, filter_contacts, read_robot
-from ppo_torchrl.robots.terrain import STEP_BODY, TERRAIN_STEP_KEYS, add_step
+from ppo_torchrl.tasks.locomotion.terrain import STEP_BODY, TERRAIN_STEP_KEYS, add_step
 
 HEADINGS = {"x": 0.0, "-x": 180.0, "y": 90.0, "-y": 270.0}
 GROUND, FOOT, OTHER, NON_FOOT = 1, 2, 0, 3  # a geom's kind (Contacts): the terrain, a foot, a foot body's other geom, a non-foot body's
