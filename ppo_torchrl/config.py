@@ -346,6 +346,9 @@ class LossConfig:
     normalize_advantage: bool = True  # per minibatch
     kl_target: float = 0.01  # kl_ppo: target KL (dtarg)
     kl_beta: float = 1.0  # kl_ppo: initial KL penalty coefficient
+    # Early stop of the update (CleanRL's target_kl): once an epoch's mean approximate KL to the collecting policy
+    # passes this, the batch's remaining epochs are skipped (train/epochs logs how many ran). null: every epoch.
+    stop_kl: Optional[float] = None
     entropy_samples: int = 1  # Monte-Carlo samples where entropy has no closed form (TanhNormal)
 
 
@@ -356,6 +359,10 @@ class AdvantageConfig:
     name: str = "gae"
     gamma: float = 0.99
     lmbda: float = 0.95
+    # Advantages (and value targets) computed again before every epoch after the first, with the critic as the
+    # update has left it ("What Matters in On-Policy RL", Andrychowicz et al. 2020; Tianshou's recompute_advantage).
+    # The old values that value clipping reads stay the collected ones. false: once per batch (TorchRL's, SB3's).
+    recompute: bool = False
 
 
 @dataclass

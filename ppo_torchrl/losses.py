@@ -75,6 +75,7 @@ LOSSES: Dict[str, Callable[[object, ActorCritic], LossModule]] = {
 # Losses torch.compile cannot take whole: KLPENPPOLoss updates its KL coefficient in place inside
 # forward, which inductor refuses. compile=auto leaves these eager.
 NOT_COMPILABLE = {"kl_ppo": "its adaptive KL coefficient is updated in place inside the loss"}
+KL_LOSSES = ("clip_ppo", "kl_ppo", "ppo")  # the losses that output their approximate KL (loss.stop_kl reads it)
 
 
 # The batch keys the losses read (KLPENPPOLoss also reads the old loc/scale; value clipping the old

@@ -189,6 +189,8 @@ class Trainer:
         if self.resumed:
             truncate_logs(self.run_dir, self.frames)
         columns = COLUMNS + [k for k in self.collector.metric_keys() if k not in COLUMNS]  # the task's own too
+        if cfg.loss.stop_kl is not None:  # how many epochs each update ran before the KL stop
+            columns.append("train/epochs")
         self.metrics = MetricsFile(self.run_dir / "metrics.csv", columns, append=self.resumed)
         if not self.resumed:  # a resume's overrides reach config.yaml once an iteration has completed
             self.write_config()
@@ -333,12 +335,18 @@ class Trainer:
         mb_size = cfg.loss.minibatch_size or n
         epochs, step = cfg.loss.epochs, self.minibatch_step
         rows, grad_norms = [], []
-        for _ in range(epochs):
+        for epoch in range(epochs):
+            if epoch and cfg.advantage.recompute:  # advantage.recompute: GAE again with the critic as updated so far
+                flat = self._recompute_advantage(batch)
             shuffled = flat[torch.randperm(n, device=self.device)]  # one gather per epoch; minibatches are views
             for minibatch in shuffled.split(mb_size):
                 metrics, grad_norm = step(minibatch)  # a non-finite loss or gradient: that step is not taken
                 rows.append(metrics)
                 grad_norms.append(grad_norm)
+            this_epoch = rows[len(rows) * epoch // (epoch + 1):]
+            if cfg.loss.stop_kl is not None and self._epoch_kl(this_epoch, step) > cfg.loss.stop_kl:
+                epochs = epoch + 1  # loss.stop_kl: the rest of this batch's epochs are skipped (CleanRL's target_kl)
+                break
         # Checked once per update, not per minibatch (a tensor-to-bool sync each): the run stops all the
         # same, and the message names the first minibatch whose step was skipped.
         metrics, grad_norms = torch.stack(rows), torch.stack(grad_norms)
@@ -355,7 +363,24 @@ class Trainer:
         for key, value in zip(step.metric_keys, means[1:]):
             stats[LOSS_METRICS[key]] = value
         stats["train/grad_norm"] = grad_norms.mean().item()
+        if cfg.loss.stop_kl is not None:
+            stats["train/epochs"] = epochs
         return stats
+
+    def _recompute_advantage(self, batch: TensorDict) -> TensorDict:
+        """advantage.recompute: the batch's advantages and value targets from the critic as it is now; the collected
+        values stay (value clipping's old values). The loss's view of the batch, made again."""
+        with torch.no_grad():
+            collected = batch.get("state_value").clone()
+            self.advantage(batch)
+            batch.set("state_value", collected)
+        return batch.reshape(-1).select(*LOSS_INPUT_KEYS, strict=False)
+
+    @staticmethod
+    def _epoch_kl(rows: list, step) -> float:
+        """The mean approximate KL over one epoch's minibatch rows (one sync per epoch)."""
+        at = 1 + [LOSS_METRICS[k] for k in step.metric_keys].index("train/approx_kl")
+        return float(torch.stack(rows)[:, at].mean())
 
     def _non_finite(self, quantity: str, epoch: int, minibatch: Optional[int]) -> None:
         where = f"epoch {epoch + 1}" + (f", minibatch {minibatch + 1}" if minibatch is not None else "")

@@ -35,7 +35,7 @@ def validate_config(cfg, keep_env: bool = False, build_env: bool = True):
     from ppo_torchrl.envs import env_spec
     from ppo_torchrl.eval_worker import BACKGROUND_CHOICES
     from ppo_torchrl.loggers import LOGGERS
-    from ppo_torchrl.losses import LOSSES, OPTIMIZERS, NOT_COMPILABLE
+    from ppo_torchrl.losses import KL_LOSSES, LOSSES, OPTIMIZERS, NOT_COMPILABLE
     from ppo_torchrl.models import validate_policy_config
     from ppo_torchrl.normalization import transforms_checks
 
@@ -99,6 +99,11 @@ def validate_config(cfg, keep_env: bool = False, build_env: bool = True):
         (positive_or_null(loss.clip_value), f"loss.clip_value={loss.clip_value} must be > 0 (or null)"),
         (loss.kl_target > 0 and loss.kl_beta >= 0, f"loss.kl_target={loss.kl_target} must be > 0 and loss.kl_beta >= 0"),
         (loss.entropy_samples >= 1, f"loss.entropy_samples={loss.entropy_samples} must be >= 1"),
+        (positive_or_null(loss.stop_kl), f"loss.stop_kl={loss.stop_kl} must be > 0 (or null: every epoch)"),
+        (loss.stop_kl is None or loss.name in KL_LOSSES,
+         f"loss.stop_kl needs a loss that measures its KL ({', '.join(KL_LOSSES)}), not loss={loss.name}"),
+        (not adv.recompute or adv.name == "gae",
+         f"advantage.recompute=true recomputes GAE with the updated critic; advantage={adv.name} has no critic in it"),
         one_of("advantage.name", adv.name, ESTIMATORS),
         (0 <= adv.gamma <= 1 and 0 <= adv.lmbda <= 1,
          f"advantage.gamma={adv.gamma} and advantage.lmbda={adv.lmbda} must lie in [0, 1]"),

@@ -1,0 +1,62 @@
+"""Issue 75's levers of the update: advantages recomputed before every epoch (advantage.recompute) and the KL
+early stop (loss.stop_kl), on a real env and the real trainer."""
+
+import pytest
+import torch
+
+from ppo_torchrl.errors import ConfigError
+from ppo_torchrl.trainer import Trainer
+from ppo_torchrl.validation import validate_config
+
+WHOLE = ["collector.total_frames=256", "loss.minibatch_size=null", "compile=false"]
+
+
+def test_recomputed_advantages_are_those_of_the_critic_the_first_epoch_left(tiny_cfg, tmp_path):
+    """epochs=2, one minibatch each: the second epoch trains on GAE of the critic after the first (a one-epoch
+    trainer of the same seed gives that critic); value clipping's old values stay the collected ones."""
+    once = Trainer(tiny_cfg(*WHOLE, "loss.epochs=1"), tmp_path / "once")
+    twice = Trainer(tiny_cfg(*WHOLE, "loss.epochs=2", "advantage.recompute=true"), tmp_path / "twice")
+    a, b = once.collector.collect(), twice.collector.collect()
+    torch.testing.assert_close(a.get("observation"), b.get("observation"), rtol=0, atol=0)
+    once.update(a)
+    collected = b.clone()
+    twice.prepare(collected)  # the advantages a batch starts the update with
+    twice.update(b)
+    with torch.no_grad():
+        once.advantage(a)  # GAE of the critic as the first epoch left it
+    torch.testing.assert_close(b.get("advantage"), a.get("advantage"), rtol=1e-5, atol=1e-6)
+    assert not torch.allclose(b.get("advantage"), collected.get("advantage"), rtol=1e-3, atol=1e-4)
+    torch.testing.assert_close(b.get("state_value"), collected.get("state_value"), rtol=0, atol=0)
+    once.collector.close()
+    twice.collector.close()
+
+
+def test_the_kl_early_stop_skips_the_rest_of_the_batchs_epochs(tiny_cfg, tmp_path):
+    """A stop_kl any step passes: one epoch of 4 minibatches is taken, not 2 x 4; a generous one runs them all."""
+    steps = {}
+    for name, stop in (("tight", 1e-12), ("loose", 10.0)):
+        trainer = Trainer(tiny_cfg("collector.total_frames=256", "compile=false", f"loss.stop_kl={stop}"),
+                          tmp_path / name)
+        stats = trainer.update(trainer.collector.collect())
+        steps[name] = (stats["train/epochs"], int(trainer.optimizer.state_dict()["state"][0]["step"]))
+        trainer.collector.close()
+    assert steps == {"tight": (1, 4), "loose": (2, 8)}
+
+
+@pytest.mark.parametrize("overrides, expected", [
+    (["loss.stop_kl=0"], "loss.stop_kl=0.0 must be > 0"),
+    (["loss=a2c", "loss.stop_kl=0.02"], "loss.stop_kl needs a loss that measures its KL"),
+    (["advantage=mc", "advantage.recompute=true"], "advantage.recompute=true recomputes GAE"),
+])
+def test_the_levers_bad_values_are_one_clear_error(tiny_cfg, overrides, expected):
+    with pytest.raises(ConfigError, match=expected):
+        validate_config(tiny_cfg(*overrides), build_env=False)
+
+
+def test_a_run_with_the_kl_stop_logs_its_epochs_per_update(tiny_cfg, tmp_path):
+    import csv
+
+    Trainer(tiny_cfg("loss.stop_kl=1e-12"), tmp_path).train()
+    with open(tmp_path / "metrics.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert [row["train/epochs"] for row in rows] == ["1", "1"]
