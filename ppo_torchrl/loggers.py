@@ -22,11 +22,10 @@ LOGGERS = ("csv", "tensorboard", "wandb", "mlflow", "none")
 COLUMNS = [
     "iteration", "frames", "time_s", "sps", "lr",
     "train/episode_return", "train/episode_length", "train/return_last100", "train/episodes",
-    "eval/return_mean", "eval/return_std", "eval/length_mean", "eval/forward_velocity", "eval/success_rate",
+    "eval/return_mean", "eval/return_std", "eval/length_mean",
     "loss/objective", "loss/critic", "loss/entropy", "loss/total",
     "train/entropy", "train/approx_kl", "train/clipfrac", "train/explained_variance", "train/grad_norm",
     "policy/loc_mean", "policy/scale_mean", "train/value_mean", "train/advantage_std",
-    "env/terrain_level", "env/terrain_success",  # a step env's curriculum (collector.env_metrics)
 ]
 EXTRA = {"tensorboard": "tensorboard", "wandb": "wandb", "mlflow": "mlflow-skinny"}
 # MuJoCo warnings about a model file we ship or Gymnasium does, which the user can do nothing about

@@ -216,3 +216,18 @@ def test_fixed_observation_statistics_are_fitted_on_a_one_row_batch_of_the_task(
     assert norm.frozen
     np.testing.assert_allclose(norm.stats.mean, np.mean(obs, axis=0), rtol=1e-9, atol=1e-12)
     env.close()
+
+
+def test_metrics_csv_columns_of_a_task_are_the_tasks_own_not_the_loggers():
+    """The logger's columns name no task (issue 72: the trainer logs what a task returns without naming it); a legged
+    task declares its eval figures, its curriculum's level and success and each reward term's sum."""
+    from ppo_torchrl.env_rows import BatchRows
+    from ppo_torchrl.loggers import COLUMNS
+
+    assert not [c for c in COLUMNS if c.startswith(("env/", "reward/")) or c in ("eval/forward_velocity",
+                                                                                 "eval/success_rate")]
+    keys = BatchRows(LeggedBatchEnv(gym_make_kwargs(legged_config(GO1).env))).metric_keys()
+    assert keys[:4] == ["eval/forward_velocity", "eval/success_rate", "env/terrain_level", "env/terrain_success"]
+    assert len(keys) > 4 and all(k.startswith("reward/") for k in keys[4:])
+    flat = BatchRows(LeggedBatchEnv(gym_make_kwargs(legged_config(GO1, "env.terrain.curriculum=false").env)))
+    assert "env/terrain_level" not in flat.metric_keys()

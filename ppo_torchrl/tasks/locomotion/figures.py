@@ -95,7 +95,7 @@ def figures(cfg, episodes: dict, result: dict) -> None:
     result["columns"] = {column: result[key] for column, key in COLUMNS.items() if result.get(key) is not None}
 
 
-# metrics.csv's eval columns (loggers.COLUMNS) a training run fills from these figures
+# metrics.csv's eval columns of the task (LeggedTask.metric_keys) a training run fills from these figures
 COLUMNS = {"eval/forward_velocity": "forward_velocity_mean", "eval/success_rate": "success_rate"}
 
 

@@ -263,6 +263,13 @@ class LeggedTask:
         return [{f"reward/{name}": float(v) for name, v in zip(self.names, sums[i])}
                 for i in range(self.n) if not np.isnan(sums[i, 0])]
 
+    def metric_keys(self) -> List[str]:
+        """metrics.csv's columns of the task: its in-training eval's figures (figures.COLUMNS), the terrain's
+        curriculum, each reward term's episode sum; the trainer logs them without naming them."""
+        from ppo_torchrl.tasks.locomotion.figures import COLUMNS as EVAL_COLUMNS
+
+        return list(EVAL_COLUMNS) + self.terrain.metric_keys() + [f"reward/{name}" for name in self.names]
+
     def metrics(self) -> List[dict]:
         """What a training run logs of the rows: the terrain's curriculum, the reward terms' episode sums."""
         return self.terrain.metrics() + self.term_metrics()  # mean_metrics averages each key over the dicts holding it

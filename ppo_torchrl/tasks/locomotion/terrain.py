@@ -1,6 +1,6 @@
 """The terrain of a legged batch, behind one small protocol: where the ground is (`height_at(rows, xy)`, 2-D
 points), how a row's episode draws it (`draw`), what an episode's end tells it (`episode_ended`), and what a
-training run logs of it (`metrics`). A terrain kind is one class here with these methods.
+training run logs of it (`metrics`, under the keys `metric_keys` names). A terrain kind is one class here with these methods.
 
 `StepTerrain`: one box across each row's path (env.terrain: its height and distance drawn per episode from a
 range that a success-driven curriculum widens, a band under the curriculum's level, a share of flat episodes),
@@ -22,6 +22,7 @@ import numpy as np
 
 from ppo_torchrl.errors import ConfigError
 
+CURRICULUM_KEYS = ("env/terrain_level", "env/terrain_success")  # what a training run logs of a curriculum
 STEP_BODY = "step"  # terrain models: the static body that holds the step's box geom
 TERRAIN_STEP_KEYS = ("step_height", "step_height_range", "step_distance")
 STEP_WIDTH = 100.0  # m across the path: it cannot be walked around
@@ -64,6 +65,9 @@ class FlatTerrain:
         pass
 
     def metrics(self) -> List[dict]:
+        return []
+
+    def metric_keys(self) -> List[str]:
         return []
 
     def row_state(self, i: int) -> dict:
@@ -199,9 +203,13 @@ class StepTerrain:
         """Per row, what a training run logs of its curriculum ([] without one, evaluation included)."""
         if not self.curriculum:
             return []
-        return [{"env/terrain_level": float(self.level[i]),
-                 "env/terrain_success": float(np.mean(self.recent[i])) if self.recent[i] else 0.0}
+        level, success = CURRICULUM_KEYS
+        return [{level: float(self.level[i]), success: float(np.mean(self.recent[i])) if self.recent[i] else 0.0}
                 for i in range(self.n)]
+
+    def metric_keys(self) -> List[str]:
+        """The keys `metrics` gives (metrics.csv's columns of the terrain)."""
+        return list(CURRICULUM_KEYS) if self.curriculum else []
 
     def row_state(self, i: int) -> dict:
         return {"step_height": float(self.height[i]), "step_edge": float(self.edge[i]), "level": float(self.level[i]),
