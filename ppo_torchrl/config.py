@@ -101,7 +101,7 @@ class LocomotionConfig:
     heading: str = "x"
     # The forward reward counts speed up to this (m/s) and no more; null: all of it (Gymnasium's).
     target_speed: Optional[float] = None
-    # Actuators (each must drive a joint; null: as the model file has them). tasks/locomotion/world.py explains the choice.
+    # Actuators (each must drive a joint; null: as the model file has them); tasks/locomotion/world.py says why.
     torque_limit: Optional[float] = None  # N m: every actuator's peak joint torque (its forcerange)
     # rad/s: the drive's torque-speed line, net driving torque <= torque_limit x (1 - speed / this):
     # joint damping of torque_limit / joint_speed_limit on each actuated joint (a motor's back-EMF,

@@ -8,7 +8,8 @@ two kinds of env.
 Both give: `n`; `step(actions)` -> (observations, rewards, terminated, truncated) as arrays, no reset; `reset_row(i)`
 (the row's next episode, or the position held for it); `last_obs()`; `episodes()` (each row's return and length so
 far); `metrics()` (what each row reports: a step env's curriculum, a task's reward terms) and `metric_keys()` (the
-keys beyond loggers.COLUMNS that metrics.csv gets a column for: the task's own, which the trainer never names); `positions()`,
+keys beyond loggers.COLUMNS that metrics.csv gets a column for: the task's own, which the trainer never names);
+`positions()`,
 `restore(positions)` (now) and `hold(positions)` (at each row's next reset: TorchRL's Collector resets first);
 `layout()`; `privileged_layout()` (the layout of the env's privileged observation, None without one: what
 policy.critic_obs=privileged gives the critic) and `privileged(rows)` (that observation now, raw: after a step, or

@@ -241,7 +241,8 @@ def tracking_camera(env_id: str) -> dict:
     """The gym.make kwargs of a video that follows the robot. Gymnasium's MuJoCo models carry a `track` camera
     on the torso in trackcom mode (Hopper, Walker2d, HalfCheetah, Ant, Humanoid), but Gymnasium 1.x renders from
     a free camera that stays where the episode began unless the camera is named. A MuJoCo env without one falls
-    back to that free camera; other envs take no camera. (MJCF robots: tasks/locomotion/filming.py adds `track` when missing.)"""
+    back to that free camera; other envs take no camera. (MJCF robots: tasks/locomotion/filming.py adds `track` when
+    missing.)"""
     from gymnasium.envs.registration import load_env_creator
 
     try:
@@ -431,8 +432,9 @@ def make_torchrl_env(
     if not train and t.obs_norm != "none" and obs_stats is None:
         raise ValueError("a frozen observation normalization needs obs_stats")
     # each segment of the observation scaled as the env declares it (layout.py; one running segment by default)
+    fit_env = functools.partial(make_batch if batched(env_cfg) else make_gym_env, env_cfg)  # obs_norm=fixed: one row
     obs_norm = make_observation_normalizer(t, obs_dim, obs_stats, frozen=not train, seed=0 if seed is None else seed,
-                                           fit_env=functools.partial(make_batch if batched(env_cfg) else make_gym_env, env_cfg) if train else None,
+                                           fit_env=fit_env if train else None,
                                            layout=rows.layout())
     reward_norm = make_reward_normalizer(t, num_envs, gamma) if train else None
     privileged_layout = rows.privileged_layout() if privileged else None

@@ -15,7 +15,7 @@ An env that declares nothing (Gymnasium's MuJoCo envs) is one running segment ov
 checkpoint's statistics without a layout (a run saved before issue 59): the normalization every earlier
 run trained and is evaluated with, bit for bit.
 
-Who does what: the env declares its segments (`observation_layout()`; tasks/locomotion/task.py, LeggedTask.layout, for the legged env),
+Who does what: the env declares its segments (`observation_layout()`; LeggedTask.layout for the legged env),
 `ObservationNormalizer` (normalization.py) turns them into per-element vectors once (`vectors`) and keeps
 the statistics; the layout travels with them (`to_state`, in a checkpoint's "obs") to evaluation and
 export, which bakes the same vectors. So a change of one segment's treatment is the env's declaration

@@ -343,8 +343,8 @@ class Trainer:
                 metrics, grad_norm = step(minibatch)  # a non-finite loss or gradient: that step is not taken
                 rows.append(metrics)
                 grad_norms.append(grad_norm)
-            this_epoch = rows[len(rows) * epoch // (epoch + 1):]
-            if cfg.loss.stop_kl is not None and self._epoch_kl(this_epoch, step) > cfg.loss.stop_kl:
+            if cfg.loss.stop_kl is not None and \
+                    self._epoch_kl(rows[len(rows) * epoch // (epoch + 1):], step) > cfg.loss.stop_kl:
                 epochs = epoch + 1  # loss.stop_kl: the rest of this batch's epochs are skipped (CleanRL's target_kl)
                 break
         # Checked once per update, not per minibatch (a tensor-to-bool sync each): the run stops all the

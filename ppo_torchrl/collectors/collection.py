@@ -134,7 +134,8 @@ class Collection:
         return finished
 
     def metric_keys(self) -> List[str]:
-        """The env's metrics beyond loggers.COLUMNS (a task's eval figures, curriculum and reward terms), for metrics.csv."""
+        """The env's metrics beyond loggers.COLUMNS (a task's eval figures, curriculum and reward terms), for
+        metrics.csv."""
         return self.state.rows.metric_keys()
 
     def env_metrics(self) -> Dict[str, float]:

@@ -9,12 +9,11 @@ task needs each physics step (the joint-speed-limit cost, evaluate's gait figure
 step at a time. What the task reads is then gathered into arrays over the rows (task.Reading), and the task
 (task.py) computes observations, rewards and endings as arrays.
 
-A row is what one env of the locomotion env before the rebuild was (robots/env.py, gone since; tests/legged_reference.py): seeded as
-Gymnasium seeds an env (`seed + i`), it draws its step and its reset noise from its own RNG in the same order, so
-the same actions from the same state give the same physics states, and its position (`row_position`: the
-simulator's integration state, the time limit's counter, the RNG, the episode memory, the terrain's row) restores
-it bit for bit (a resumed run continues as the uninterrupted one).
-"""
+A row is what one env of the locomotion env before the rebuild was (robots/env.py, gone; tests/legged_reference.py):
+seeded as Gymnasium seeds an env (`seed + i`), it draws its step and its reset noise from its own RNG in the same
+order, so the same actions from the same state give the same physics states, and its position (`row_position`: the
+simulator's integration state, the time limit's counter, the RNG, the episode memory, the terrain's row) restores it
+bit for bit (a resumed run continues as the uninterrupted one)."""
 
 from __future__ import annotations
 

@@ -1,11 +1,12 @@
 """The terrain of a legged batch, behind one small protocol: where the ground is (`height_at(rows, xy)`, 2-D
 points), how a row's episode draws it (`draw`), what an episode's end tells it (`episode_ended`), and what a
-training run logs of it (`metrics`, under the keys `metric_keys` names). A terrain kind is one class here with these methods.
+training run logs of it (`metrics`, under the keys `metric_keys` names). A terrain kind is one class here with these
+methods.
 
 `StepTerrain`: one box across each row's path (env.terrain: its height and distance drawn per episode from a
 range that a success-driven curriculum widens, a band under the curriculum's level, a share of flat episodes),
-each row with its own curriculum, as N envs of the locomotion env before the rebuild had (robots/terrain.py, gone since: the
-same draws from the same RNG, so a row continues that env's stream). The step is moved in the row's own model
+each row with its own curriculum, as N envs of the locomotion env before the rebuild had (robots/terrain.py, gone
+since: the same draws from the same RNG, so a row continues that env's stream). The step is moved in the row's own model
 (`body_pos`, no recompile). Heights are read along the heading, the box being 100 m wide; success is the trunk
 `success_margin` beyond the edge. A model that has no step gets one at build time (`add_step`, MjSpec: no model file
 is edited), its box reaching below the floor, so any height from 0 to its depth is a solid step.
@@ -44,7 +45,6 @@ def add_step(spec, height: float, distance: float, depth: float, heading) -> Non
         geom.contype, geom.conaffinity, geom.condim = floor.contype, floor.conaffinity, floor.condim
         geom.friction, geom.material = floor.friction, floor.material
         geom.solref, geom.solimp, geom.priority = floor.solref, floor.solimp, floor.priority
-
 
 
 class FlatTerrain:

@@ -2,12 +2,12 @@
 the facts read from it that every part of the task shares (ids, the drives' control mapping, the feet).
 
 `build_world` takes the env's keyword arguments (envs.gym_make_kwargs: the recipe already scaled to the robot) and
-makes the model exactly as the locomotion env before the rebuild did (robots/env.py, gone since; tests/legged_reference.py): the step
-added and the robot's contacts filtered at build time (MjSpec; no model file is written), the physics step set,
-torque motors made PD servos around the standing pose, the robustness world's friction and trunk mass, and the
-step box turned to face the heading. Each row of the batch steps its own copy of this model (`row_model`): the
-terrain moves its row's step in it, a randomized world changes it without touching the others.
-"""
+makes the model exactly as the locomotion env before the rebuild did (robots/env.py, gone;
+tests/legged_reference.py): the step added and the robot's contacts filtered at build time (MjSpec; no model file is
+written), the physics step set, torque motors made PD servos around the standing pose, the robustness world's
+friction and trunk mass, and the step box turned to face the heading. Each row of the batch steps its own copy of
+this model (`row_model`): the terrain moves its row's step in it, a randomized world changes it without touching the
+others."""
 
 from __future__ import annotations
 
