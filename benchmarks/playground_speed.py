@@ -13,6 +13,7 @@ of 3x the frames and reports the extra frames over the extra CPU seconds (the st
 
     python benchmarks/playground_speed.py                        # Go1JoystickFlatTerrain-v1, envs 8,32 x threads 1,2
     python benchmarks/playground_speed.py --steps 40000 --frames 65536 --no-run
+    python benchmarks/playground_speed.py --envs 32 --threads 2 --marginal --set torch_threads=2
 """
 
 from __future__ import annotations
@@ -82,12 +83,12 @@ def collector_rate(task: str, num_envs: int, threads: int, frames: int) -> float
         collection.close()
 
 
-def run_rate(task: str, num_envs: int, threads: int, frames: int) -> dict:
+def run_rate(task: str, num_envs: int, threads: int, frames: int, overrides: tuple = ()) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         args = [sys.executable, "-m", "ppo_torchrl", "experiment=playground_joystick", f"env.id={task}",
                 f"collector.num_envs={num_envs}", f"env.playground.threads={threads}",
                 f"collector.total_frames={frames}", "eval.every_frames=0", "eval.final_episodes=0",
-                "checkpoint.every_frames=0", "logger=none", "compile=false", f"hydra.run.dir={tmp}/run"]
+                "checkpoint.every_frames=0", "logger=none", "compile=false", *overrides, f"hydra.run.dir={tmp}/run"]
         import resource
 
         started, before = time.perf_counter(), resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -111,18 +112,20 @@ def main() -> None:
     parser.add_argument("--no-run", action="store_true", help="raw and collector rates only")
     parser.add_argument("--marginal", action="store_true",
                         help="also a run of 3x the frames: the run's frames per CPU second without its start-up")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="an override of the runs (e.g. torch_threads=2); repeatable")
     parser.add_argument("--rounds", type=int, default=1, help="each case this many times, the cases alternated")
     args = parser.parse_args()
     for round_ in range(args.rounds):
         for n in (int(v) for v in args.envs.split(",")):
             for threads in (int(v) for v in args.threads.split(",")):
-                row = {"round": round_ + 1, "task": args.task, "num_envs": n, "threads": threads,
+                row = {"round": round_ + 1, "task": args.task, "num_envs": n, "threads": threads, "set": args.set,
                        "raw_steps": raw_rate(args.task, n, threads, args.steps),
                        "collector_frames": collector_rate(args.task, n, threads, args.frames)}
                 if not args.no_run:
-                    row["run"] = run_rate(args.task, n, threads, args.frames)
+                    row["run"] = run_rate(args.task, n, threads, args.frames, tuple(args.set))
                     if args.marginal:  # a second, longer run: its extra frames over its extra CPU time, no start-up
-                        longer = run_rate(args.task, n, threads, 3 * args.frames)
+                        longer = run_rate(args.task, n, threads, 3 * args.frames, tuple(args.set))
                         row["run_3x"] = longer
                         row["run_marginal_frames_per_cpu_s"] = round(
                             (longer["frames"] - row["run"]["frames"]) / (longer["process_cpu_s"] - row["run"]["process_cpu_s"]))
