@@ -224,6 +224,9 @@ class LeggedConfig:
     # contacts as soft as it says, its stiffest servo accurate and explicit damping stable; conf/env/legged.yaml),
     # model (the model's own timestep: runs saved before the key existed trained so), or a step in seconds.
     physics_dt: str = "model"
+    # The contacts' friction cone: model (the model's own; Menagerie's robots: elliptic), pyramidal (2.4x the physics'
+    # rate on Go1, a different friction model: results/speed/physics_options_2026-12-03/) or elliptic.
+    friction_cone: str = "model"
     target_speed: float = 0.35  # x sqrt(g l): the forward reward counts speed up to this
     forward_reward_weight: float = 3.5  # per sqrt(g l) of forward speed
     fall_height: float = 0.4  # x l: the trunk below this (m above the floor) is a fall

@@ -159,6 +159,26 @@ def test_the_physics_step_is_the_rule_s_and_a_given_one_wins():
     assert given.dt == pytest.approx(0.02)
 
 
+def test_the_friction_cone_is_the_model_s_unless_one_is_given():
+    """friction_cone model keeps Menagerie's elliptic cone; pyramidal and elliptic are set in every row's model (and
+    named in the deploy manifest); another name is one failed check."""
+    import mujoco
+
+    from ppo_torchrl.compose import compose
+    from ppo_torchrl.robots.recipe import legged_checks
+    from ppo_torchrl.tasks.locomotion.deploy import manifest
+
+    assert go1().models[0].opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC
+    pyramidal = go1("env.legged.friction_cone=pyramidal")
+    assert {int(m.opt.cone) for m in pyramidal.models} == {int(mujoco.mjtCone.mjCONE_PYRAMIDAL)}
+    for cone in ("pyramidal", "model"):
+        cfg = compose(["experiment=legged_trot_v2", f"env.xml_file={GO1}", f"env.legged.friction_cone={cone}"])
+        assert manifest(cfg)["trained_friction_cone"] == ("pyramidal" if cone == "pyramidal" else "elliptic")
+    legged = compose(["env=legged", f"env.xml_file={GO1}", "env.legged.friction_cone=soft"]).env.legged
+    assert [message for ok, message in legged_checks(legged) if not ok] == [
+        "env.legged.friction_cone=soft is not known; use model or pyramidal or elliptic"]
+
+
 def test_bad_contacts_and_physics_steps_are_refused_by_the_legged_checks():
     """A step of 0, longer than the control step, or one that does not divide it (0.003 s: 6.67 steps of 20 ms) is
     one failed check; rule, model and a dividing step pass."""

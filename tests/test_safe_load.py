@@ -125,6 +125,8 @@ def test_a_packed_state_keeps_what_it_holds():
 
 def test_every_checkpoint_the_app_wrote_loads_through_the_safe_path():
     shipped = sorted(ROOT.glob("zoo/**/*.pt")) + sorted(ROOT.glob("results/**/*.pt"))
+    # a run going on under results/ rotates its rolling checkpoints (git-ignored, never shipped) away mid-test
+    shipped = [path for path in shipped if not path.name.startswith("frames_")]
     assert shipped
     for path in shipped:
         state = checkpoint.load(path)  # weights_only, and every packed env state read as data

@@ -45,6 +45,7 @@ DERIVED = {
 
 
 PHYSICS_STEPS = ("rule", "model")  # env.legged.physics_dt, besides a step in seconds
+FRICTION_CONES = ("model", "pyramidal", "elliptic")  # env.legged.friction_cone
 SERVO_PHASE = 0.5  # rad: the stiffest servo turns at most this much of its oscillation per physics step
 DAMPING_STEP = 1.0  # kd / I x dt where the integrator takes the servos' damping explicitly (Euler): half its limit of 2
 
@@ -92,6 +93,7 @@ def derived_values(robot: Robot, legged) -> dict:
             "heading": f"{math.degrees(math.atan2(robot.heading[1], robot.heading[0])):.6f}",
             "frame_skip": max(1, round(legged.control_dt / dt)),
             "physics_dt": dt, "contacts": legged.get("contacts", CONTACT_MODES[0]),
+            "friction_cone": legged.get("friction_cone", FRICTION_CONES[0]),
             "target_speed": legged.target_speed * speed,
             "forward_reward_weight": legged.forward_reward_weight / speed,
             "healthy_z_range": [legged.fall_height * l, legged.too_high * l],
@@ -223,6 +225,9 @@ def legged_checks(legged) -> list:
                                 and abs(legged.control_dt / seconds - round(legged.control_dt / seconds)) < 1e-6)
     checks.append((whole, f"env.legged.physics_dt={dt} must be rule, model or a step in seconds that divides "
                           f"env.legged.control_dt={legged.control_dt} into whole steps"))
+    cone = legged.get("friction_cone", FRICTION_CONES[0])
+    checks.append((cone in FRICTION_CONES, f"env.legged.friction_cone={cone} is not known; use "
+                   + " or ".join(FRICTION_CONES)))
     terrain = legged.get("terrain", TERRAINS[0])
     checks.append((terrain in TERRAINS, f"env.legged.terrain={terrain} is not known; use " + " or ".join(TERRAINS)))
     obs_layout = legged.get("obs_layout", OBS_LAYOUTS[0])

@@ -47,6 +47,7 @@ def manifest(cfg) -> dict:
             "observation": [{"name": n, "size": int(k)} for n, k in parts], "obs_dim": int(task.obs_dim),
             "normalization_segments": segments,
             "control_dt": world.dt, "trained_physics_dt": float(model.opt.timestep),
+            "trained_friction_cone": ("pyramidal", "elliptic")[int(model.opt.cone)],  # mjtCone's order
             "feet_geoms": [int(g) for g in world.feet], "foot_names": list(world.foot_names),
             "trunk_body": int(world.trunk), "standing_qpos": [float(q) for q in world.init_qpos],
             "fall_height": float(task.healthy_z[0]),

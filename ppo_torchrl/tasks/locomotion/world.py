@@ -127,6 +127,9 @@ def _compile(kwargs: dict, robot: Robot, render: bool) -> tuple:
     contact_filter = filter_contacts(spec) if legged.get("contacts") == "terrain" else None
     if legged.get("physics_dt"):
         spec.option.timestep = float(legged["physics_dt"])
+    cone = legged.get("friction_cone") or "model"
+    if cone != "model":
+        spec.option.cone = {"pyramidal": mujoco.mjtCone.mjCONE_PYRAMIDAL, "elliptic": mujoco.mjtCone.mjCONE_ELLIPTIC}[cone]
     if render:
         draw_hidden_robot(spec)
         add_track_camera(spec, kwargs["main_body"], heading_angle(legged.get("heading", "x")))
