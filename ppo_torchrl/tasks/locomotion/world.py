@@ -128,8 +128,8 @@ def _compile(kwargs: dict, robot: Robot, render: bool) -> tuple:
     if legged.get("physics_dt"):
         spec.option.timestep = float(legged["physics_dt"])
     cone = legged.get("friction_cone") or "model"
-    if cone != "model":
-        spec.option.cone = {"pyramidal": mujoco.mjtCone.mjCONE_PYRAMIDAL, "elliptic": mujoco.mjtCone.mjCONE_ELLIPTIC}[cone]
+    if cone != "model":  # pyramidal or elliptic (robots/recipe.py FRICTION_CONES)
+        spec.option.cone = getattr(mujoco.mjtCone, f"mjCONE_{cone.upper()}")
     if render:
         draw_hidden_robot(spec)
         add_track_camera(spec, kwargs["main_body"], heading_angle(legged.get("heading", "x")))
