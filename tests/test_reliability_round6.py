@@ -266,6 +266,8 @@ BENCH = {
     "whole_run --frames -5": (whole_run, ["--frames", "-5"], "must be >= 1, not -5"),
     "whole_run a file as --out": (whole_run, ["--out", "{tmp}/file"], "is a file"),
     "whole_run --backends nope": (whole_run, ["--backends", "nope"], "takes fast, envpool"),
+    "whole_run --sb3-vec nope": (whole_run, ["--sb3-vec", "nope"], "takes dummy, subproc"),
+    "whole_run --num-envs 3": (whole_run, ["--num-envs", "3"], "does not divide the 2048 frames"),
 }
 
 
