@@ -85,6 +85,9 @@ def test_randomized_worlds_are_drawn_per_row_recorded_and_replayed():
     batch.reset(seed=11)
     rand, models = batch.task.randomize, batch.models
     draws = [dict(d) for d in rand.draws]
+    import mujoco  # the recipe's pyramidal cone is on every row's randomized model, not only on the base one
+
+    assert {int(m.opt.cone) for m in models} == {int(mujoco.mjtCone.mjCONE_PYRAMIDAL)}
     assert len({d["friction"] for d in draws}) == 3 and all(0.4 <= d["friction"] <= 1.25 for d in draws)
     trunk = batch.world.trunk
     base = batch.world.model
