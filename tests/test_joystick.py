@@ -277,3 +277,39 @@ def test_the_asymmetric_critic_on_a_legged_run_reads_the_privileged_observation_
         collector.close()
     with pytest.raises(ConfigError, match="collector.backend=torchrl writes no privileged"):
         make_collector(joystick(*tiny, "collector.backend=torchrl"), ac, 3, torch.device("cpu"))
+
+
+def test_the_tuning_table_keeps_a_lever_only_by_the_plans_rule(tmp_path):
+    """benchmarks/joystick_table.py on crafted tracking sets: a lever that lowers every row's v_xy error beyond base's
+    standard error is kept; one as good on v_xy but with a row falling more than base's worst is rejected; a row
+    without its tracking set waits and decides nothing."""
+    import json
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))
+    import joystick_table
+
+    def row(setting, name, v_xy, falls=0.0):
+        d = tmp_path / setting / name
+        (d / "eval").mkdir(parents=True)
+        commands = [{"command": "stand", "v_xy_error": v_xy / 2, "joint_motion_rms": 0.02},
+                    {"command": "forward", "v_xy_error": v_xy * 1.5, "joint_motion_rms": None}]
+        overall = {"episodes": 10, "falls": falls, "v_xy_error": v_xy, "yaw_rate_error": 0.04}
+        worlds = {"nominal": {"commands": commands, "overall": overall},
+                  "extreme 1": {"commands": commands, "overall": {**overall, "falls": falls}}}
+        (d / "eval" / "tracking.json").write_text(json.dumps({"worlds": worlds}))
+        (d / "summary.json").write_text(json.dumps({"frames": 20_000_000}))
+
+    for name, v in (("go1_seed6", 0.20), ("go1_seed7", 0.22), ("anymal_b_seed6", 0.18), ("anymal_b_seed7", 0.21)):
+        row("base", name, v)
+        row("better", name, v - 0.05)
+        row("falls", name, v - 0.05, falls=0.2 if name == "go1_seed7" else 0.0)
+    (tmp_path / "better" / "go1_seed8").mkdir()
+    text = joystick_table.table([(label, tmp_path / label) for label in ("base", "better", "falls")])
+    verdicts = {line.split("**")[1]: line for line in text.splitlines() if line.startswith("- **")}
+    assert "baseline" in verdicts["base"]
+    assert "kept (v_xy -0.050" in verdicts["better"] and "on 4 rows" in verdicts["better"]
+    assert "rejected" in verdicts["falls"] and "falls beyond base's worst" in verdicts["falls"]
+    assert "| better | go1_seed8 | waiting" in text
+    assert "| base | go1 seed 7 | 20,000,000 | 0.220 | 0.040 | 0% | 0% | forward 0.330 | 0.020 |" in text
