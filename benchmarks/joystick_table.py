@@ -23,6 +23,7 @@ from pathlib import Path
 
 from cli_args import ConfigError, Parser, out_file
 from cli_args import run as run_main
+from levers_table import mean_std
 
 ROW = re.compile(r"^(?P<robot>.+)_seed(?P<seed>\d+)$")
 
@@ -60,13 +61,6 @@ def rows(setting: Path) -> tuple:
         summary = json.loads((row / "summary.json").read_text()) if (row / "summary.json").is_file() else {}
         done[(m["robot"], int(m["seed"]))] = (figures(result), summary)
     return done, waiting
-
-
-def mean_std(values: list) -> tuple:
-    n = len(values)
-    mean = sum(values) / n if n else float("nan")
-    std = math.sqrt(sum((v - mean) ** 2 for v in values) / (n - 1)) if n > 1 else float("nan")
-    return mean, std
 
 
 def worse(value, limit) -> bool:
