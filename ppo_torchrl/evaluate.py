@@ -212,7 +212,12 @@ def tracking_eval(cfg, ac, obs_stats, args: dict, out_dir: Path, run_dir: Path, 
         worlds += tracking.extremes(gym_make_kwargs(cfg.env)["legged"]["randomize"])
     results = {}
     for name, draw in worlds:
-        results[name] = tracking.track(make_batch, cfg, ac, obs_stats, args["episodes"], args["seed"], draw)
+        if cfg.env.get("playground") is not None:  # a Playground joystick task (tasks/playground_tracking.py)
+            from ppo_torchrl.tasks import playground_tracking
+
+            results[name] = playground_tracking.track(cfg, ac, obs_stats, args["episodes"], args["seed"])
+        else:
+            results[name] = tracking.track(make_batch, cfg, ac, obs_stats, args["episodes"], args["seed"], draw)
         o = results[name]["overall"]
         print(f"{label}, {name}: v_xy error {o['v_xy_error']:.3f} sqrt(g l), yaw rate error {o['yaw_rate_error']:.3f} "
               f"sqrt(g / l), falls {o['falls']:.0%} of {o['episodes']} episodes", flush=True)
@@ -290,9 +295,18 @@ def main(argv: list[str]) -> dict:
     obs_stats = state["normalization"]["obs"]
     label = f"{env_label(cfg.env)} @ {state['frames']} frames ({which})"
     joystick = batched(cfg.env) and ((cfg.env.get("legged") or {}).get("command") or {}).get("kind") == "velocity"
-    if (args["tracking"] or args["drive"]) and not joystick:  # before any env is built
+    if args["tracking"] and cfg.env.get("playground") is not None:  # before any env is built
+        from ppo_torchrl.tasks.playground_tracking import layout_of
+
+        layout_of(cfg.env)  # a task whose command and velocities it can find, or one line
+        if args["extremes"]:
+            raise ConfigError("extremes=true fixes the corners of env=legged's randomization; EnvPool's Playground "
+                              "tasks randomize nothing the app can fix: leave it out")
+        joystick = True
+    if (args["tracking"] or args["drive"]) and not joystick:
         raise ConfigError(f"{'tracking=true' if args['tracking'] else 'drive='} measures a joystick run "
-                          f"(experiment=legged_joystick: env.legged.command.kind=velocity); {run_dir} is not one")
+                          f"(experiment=legged_joystick: env.legged.command.kind=velocity; tracking=true also a "
+                          f"Playground joystick task, env=playground); {run_dir} is not one")
     if args["tracking"]:
         return tracking_eval(cfg, ac, obs_stats, args, out_dir, run_dir, label)
     if args["drive"]:

@@ -28,8 +28,9 @@ def _evaluate():
                    "one height: env.terrain.step_height=<m> video=true)",
         "out": "where the eval writes its files: eval.json, the video, a height sweep's (empty: <run dir>/eval; a "
                "shipped run under zoo/ or results/: outputs/<its path>/)",
-        "tracking": "a joystick run (env.legged.command.kind=velocity): `episodes` episodes per command of a fixed set, "
-                    "each held; writes tracking.json, tracking.md and tracking.png (tasks/locomotion/tracking.py)",
+        "tracking": "a joystick run (env.legged.command.kind=velocity, or a Playground Go1 joystick task): `episodes` "
+                    "episodes per command of a fixed set, each held; writes tracking.json, tracking.md and tracking.png "
+                    "(tasks/locomotion/tracking.py, tasks/playground_tracking.py)",
         "drive": "a joystick run: film a scripted command sequence, name:vx,vy,yaw:seconds;... in the robot's units, "
                  "the command drawn in each frame: drive.mp4 (tasks/locomotion/drive.py)",
         "extremes": "with tracking=true, the same once per corner of the run's randomization (grip, trunk mass, "

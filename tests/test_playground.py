@@ -311,11 +311,61 @@ def test_the_cli_trains_resumes_evaluates_and_exports_a_playground_task(tmp_path
     result = evaluate.main([f"run={run}", "checkpoint=last", "episodes=2"])  # the commands' mains, in this process
     assert result["length_mean"] <= 50 and "reward/tracking_lin_vel" in result["episode_metrics"]
     assert json.loads((run / "eval" / "eval.json").read_text())["episode_metrics"] == result["episode_metrics"]
+    for args, says in ((["tracking=true"], "give env.max_episode_steps=417 or more"),  # 50-step episodes
+                       (["tracking=true", "extremes=true"], "extremes=true fixes the corners")):
+        with pytest.raises(ConfigError, match=says):
+            evaluate.main([f"run={run}", "checkpoint=last", *args])
+    assert not (run / "eval" / "tracking.json").exists()
+    tracked = evaluate.main([f"run={run}", "checkpoint=last", "tracking=true", "episodes=1",
+                             "env.max_episode_steps=1000"])["tracking"]["nominal"]
+    record = json.loads((run / "eval" / "tracking.json").read_text())["worlds"]["nominal"]
+    assert record["overall"] == tracked and record["leg_length"] == pytest.approx(0.426)  # read from the task's MJCF
+    rows = {r["command"]: r for r in record["commands"]}
+    assert len(rows) == 13 and (run / "eval" / "tracking.png").is_file()
+    # a policy of 512 frames barely moves: the error of each command is about its size, in the robot's units
+    assert rows["stand"]["v_xy_error"] < 0.05 and abs(rows["forward fast"]["v_xy_error"] - 0.5) < 0.1
+    assert abs(rows["turn left"]["yaw_rate_error"] - 0.25) < 0.1
     export.main([f"run={run}", "checkpoint=last"])
     assert torch.jit.load(str(run / "policy.pt"))(torch.zeros(3, 48)).shape == (3, 12)
     bad = run_cli("env=playground", "env.id=Go1Joystick-v1", *TINY, f"hydra.run.dir={tmp_path / 'bad'}")
     assert bad.returncode == 2 and not (tmp_path / "bad").exists()
     assert bad.stderr.strip().splitlines()[-1].startswith("error: env.id=Go1Joystick-v1 is not one of"), bad.stderr
+
+
+@pytest.mark.parametrize("task", ["Go1JoystickFlatTerrain-v1", "Go1JoystickRoughTerrain-v1"])
+def test_tracking_finds_the_command_and_the_trunks_motion_where_its_layout_says(task):
+    """playground_tracking.LAYOUTS, checked on the task's own observations (noise off): the command segment of the
+    actor's observation is info["command"]; the privileged velocimeter and joint angles are the noise-free ones of
+    the actor's observation (Playground's Go1 state: velocity 0-3, gyro 3-6, gravity 6-9, joint angles 9-21); the
+    gyro is the rate the gravity vector turns at in the trunk frame (dg/dt = -w x g)."""
+    from ppo_torchrl.tasks.playground_tracking import LAYOUTS
+
+    layout = LAYOUTS[task]
+    env = envpool.make(task, env_type="gymnasium", num_envs=1, num_threads=1, seed=5, noise_level=0.0)
+    env.reset()
+    rng = np.random.default_rng(1)
+    states, privileged = [], []
+    for _ in range(120):
+        obs, _, terminated, truncated, info = env.step(rng.uniform(-0.5, 0.5, (1, 12)))
+        if terminated[0] or truncated[0]:
+            break
+        s, p = obs["state"][0], obs["privileged_state"][0]
+        assert np.allclose(s[layout.command:layout.command + 3], info["command"][0])
+        assert np.allclose(p[layout.linvel:layout.linvel + 3], s[0:3])
+        assert np.allclose(p[layout.joints:layout.joints + 12], s[9:21])
+        states.append(s), privileged.append(p)
+    env.close()
+    assert len(states) > 50
+    g, w = np.array(states)[:, 6:9], np.array(privileged)[:, layout.gyro:layout.gyro + 3]
+    turned = -np.cross(0.5 * (w[1:] + w[:-1]), 0.5 * (g[1:] + g[:-1]))
+    assert np.corrcoef(turned.ravel(), (np.diff(g, axis=0) / 0.02).ravel())[0, 1] > 0.95
+
+
+def test_tracking_refuses_a_task_it_has_no_layout_for():
+    from ppo_torchrl.tasks.playground_tracking import layout_of
+
+    with pytest.raises(ConfigError, match="tracking=true on env=playground knows where .* not in BarkourJoystick-v1"):
+        layout_of(compose_config(["env=playground", "env.id=BarkourJoystick-v1"]).env)
 
 
 def test_torchrls_multisync_collector_runs_it_in_workers():

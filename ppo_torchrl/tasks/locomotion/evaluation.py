@@ -128,12 +128,18 @@ def task_episodes(make_batch, cfg, ac, obs_stats: Optional[dict], seeds: Sequenc
 def eval_policy(cfg, ac, obs_stats: Optional[dict], batch, rows: int, deterministic: bool, seed: int = 0):
     """The evaluation's policy for `rows` rows of `batch`: raw observations in, actions out, on frozen statistics;
     deterministic: as a one-env evaluation's TorchRL env and actor compute it (row by row)."""
+    return policy_of(cfg, ac, obs_stats, batch.task.obs_dim, batch.observation_layout(), batch.world.model.nu, rows,
+                     deterministic, seed)
+
+
+def policy_of(cfg, ac, obs_stats: Optional[dict], obs_dim: int, layout, act_dim: int, rows: int, deterministic: bool,
+              seed: int = 0):
+    """eval_policy's for any env whose raw observations (`obs_dim`, in `layout`) come as [rows, obs_dim] arrays."""
     from ppo_torchrl.models import NumpyPolicy
     from ppo_torchrl.normalization import make_observation_normalizer
 
-    world, task = batch.world, batch.task
     t = cfg.env.transforms
-    norm = make_observation_normalizer(t, task.obs_dim, obs_stats, frozen=True, layout=batch.observation_layout())
+    norm = make_observation_normalizer(t, obs_dim, obs_stats, frozen=True, layout=layout)
     if obs_stats is None:
         norm.enabled = False
     if ac.action_low.device.type != "cpu":
@@ -160,7 +166,7 @@ def eval_policy(cfg, ac, obs_stats: Optional[dict], batch, rows: int, determinis
         sampler.sync()
 
         def act(obs):
-            return sampler.act(norm(obs), rng.standard_normal((rows, world.model.nu), dtype=np.float32))[1]
+            return sampler.act(norm(obs), rng.standard_normal((rows, act_dim), dtype=np.float32))[1]
     return act
 
 

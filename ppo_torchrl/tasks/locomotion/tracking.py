@@ -135,7 +135,7 @@ def summarize(per_episode: list, commands=COMMANDS) -> list:
                "yaw_rate_error": float(np.mean([e["yaw_rate_error"] for e in standing]))}
         if name == "stand":
             row["joint_motion_rms"] = float(np.mean([e["joint_motion_rms"] for e in standing]))
-        if vx > 0 and vy == 0 and yaw == 0:
+        if vx > 0 and vy == 0 and yaw == 0 and standing and "foot_contact_share" in standing[0]:  # a task with feet read
             row["foot_contact_share"] = np.mean([e["foot_contact_share"] for e in standing], axis=0).tolist()
             row["touchdown_frequency"] = np.mean([e["touchdown_frequency"] for e in standing], axis=0).tolist()
             row["foot_up_over_0.5s"] = float(np.mean([max(e["longest_air_moving_s"]) > 0.5 for e in standing]))
