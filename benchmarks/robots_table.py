@@ -14,7 +14,7 @@ each foot on the ground 35-65% of the time, no foot up > 0.5 s while moving, str
 --goals 59 (issue 59's, one row per run dir, named by it): 0.25 l >= 90% on every robot; a foot up > 0.5 s while
 moving in <= 10% of episodes; drives at their torque limit <= 25% of the time; and, where the run dir has them, the
 success at 0.25 l with the grip halved (sweep_grip_half/) and the trunk 10% heavier (sweep_trunk_heavier/), no goal.
---goals 59 adds a third table: the 0.25 l episodes that did not succeed, by how they ended (a geom on the ground or
+--goals 59 adds a third table (and a fourth, one row per robot with its runs side by side, a README's): the 0.25 l episodes that did not succeed, by how they ended (a geom on the ground or
 the step, a fall, short of the line at the time limit, or across and then ended), and the curriculum's top step
 (metrics.csv's env/terrain_level): the frame it first reached 0.25 l and where it was at the end, in l. What a
 missed 0.25 l goal is made of.
@@ -106,7 +106,7 @@ def rows(entries: list, goals: dict, issue: int = 46) -> str:
     out = [head, "|---|---|---|---|---|---|---|---|---|---|"]
     if issue == 59:
         out = [head + " 0.25 l: grip halved; trunk +10% |", out[1] + "---|"]
-    verdicts = []
+    verdicts, compact = [], []
     ends = ["", "| run | 0.25 l: the episodes that did not succeed, by how they ended "
             "| the curriculum's top step: first at 0.25 l (frames) | at the end |", "|---|---|---|---|"]
     for name, robot, sweep, worlds, run_dir in entries:
@@ -151,6 +151,7 @@ def rows(entries: list, goals: dict, issue: int = 46) -> str:
             checks.append((f"drives at their limit <= {ISSUE59['torque_at_limit']:.0%} of the time",
                            at_limit <= ISSUE59["torque_at_limit"], f"{at_limit:.0%}"))
         verdicts.append((name, checks))
+        compact.append((robot, name, step, flat, robust, checks))
         if issue == 59 and step is not None:  # the third table reads each run's metrics: issue 59's only
             ends.append(f"| {name} | {misses(step)} | {curriculum(run_dir, l)} |")
     out += ["", "| goal | " + " | ".join(name for name, _ in verdicts) + " |", "|---|" + "---|" * len(verdicts)]
@@ -158,8 +159,30 @@ def rows(entries: list, goals: dict, issue: int = 46) -> str:
         cells = [f"{'met' if checks[i][1] else 'missed'} ({checks[i][2]})" for _, checks in verdicts]
         out.append(f"| {goal} | " + " | ".join(cells) + " |")
     if issue == 59:
-        out += ends
+        out += ends + ["", by_robot(compact)]
     return "\n".join(out) + "\n"
+
+
+def by_robot(compact: list) -> str:
+    """--goals 59's last table: one row per robot, its runs side by side (a / b, in the order given), the figures a
+    README shows: 0.25 l and flat success, each foot's share down on flat ground, the long swings and the drives' time
+    at their limit at 0.25 l, the two robustness worlds and the goals met."""
+    out = ["| robot (mass, l, step) | run | crosses 0.25 l | flat | each foot down, flat: LF RF LH RH "
+           "| foot up > 0.5 s (0.25 l) | drives at limit (0.25 l) | 0.25 l grip halved; trunk +10% | goals met of 7 |",
+           "|---|---|---|---|---|---|---|---|---|"]
+    groups: dict = {}
+    for robot, name, step, flat, robust, checks in compact:
+        pct = lambda r: f"{r['success_rate']:.0%}" if r else "-"  # noqa: E731
+        cells = (name.rpartition("_")[2], pct(step), pct(flat),
+                 by_corner(robot, flat["foot_contact_share"]) if flat else "-",
+                 f"{long_swings(step)[0]:.0%}" if step else "-",
+                 f"{step['torque_at_limit_share']:.0%}" if step else "-", robust, str(sum(c[1] for c in checks)))
+        groups.setdefault(robot.name, (robot, []))[1].append(cells)
+    for robot, runs in groups.values():
+        l = robot.leg_length
+        out.append(f"| {robot.name} ({robot.mass:.1f} kg, {l:.3f} m, {STEP * l * 100:.1f} cm) | "
+                   + " | ".join(" / ".join(column) for column in zip(*runs)) + " |")
+    return "\n".join(out)
 
 
 def main(argv=None) -> int:

@@ -146,3 +146,26 @@ def test_shipped_quadrupeds_joint_ranges_cover_their_actuators_targets(model):
         low, high = m.jnt_range[joint]
         c_low, c_high = m.actuator_ctrlrange[a]
         assert low <= c_low and c_high <= high, (mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, joint), m.jnt_range[joint])
+
+
+def test_the_robots_table_puts_a_robots_runs_side_by_side_as_its_goal_table_counts_them(capsys):
+    """benchmarks/robots_table.py --goals 59's last table (the README's): one row per robot, its runs a / b in the
+    order given, each run's goals met the count of `met` in its column of the goal table."""
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    sys.path.insert(0, str(root / "benchmarks"))
+    import robots_table
+
+    shipped = root / "results" / "robots" / "legged_v2_2026-11-28"
+    assert robots_table.main([str(shipped / "go1_seed12"), str(shipped / "anymal_b_seed12"), str(shipped / "go1_seed13"),
+                              "--goals", "59"]) == 0
+    text = capsys.readouterr().out
+    last = text.strip().split("\n\n")[-1].splitlines()
+    assert last[0].startswith("| robot (mass, l, step) | run |") and len(last) == 4  # head, rule, go1, anymal_b
+    cells = lambda row: [c.strip() for c in row.strip().strip("|").split("|")]  # noqa: E731
+    go1, anymal = (cells(row) for row in last[2:])
+    assert go1[0].startswith("go1 (12.7 kg, 0.426 m") and go1[1] == "seed12 / seed13" and anymal[1] == "seed12"
+    goal_table = next(t for t in text.split("\n\n") if t.startswith("| goal |")).splitlines()[2:]
+    met = [sum(cells(row)[1 + i].startswith("met") for row in goal_table) for i in range(3)]
+    assert go1[-1] == f"{met[0]} / {met[2]}" and anymal[-1] == str(met[1])
