@@ -83,24 +83,26 @@ def readme() -> str:
 
 
 def test_the_readme_shows_the_newest_reported_robot_round():
-    """The README's robot section was issue 46's table (its 80% goal, Go1 at 0%); the newest reported round is recipe
-    v2's twelve rows (results/robots/legged_v2_2026-11-28/table.md) and the v3 decision: every 0.25 l figure of the
-    README's table is the table.md's, per robot and seed, with the round's goals, seeds and commands."""
+    """The README's robot section was issue 46's table (its 80% goal, Go1 at 0%), then v2's; the newest reported round
+    is recipe v3's twelve rows (results/robots/legged_v3_2026-12-02/table.md): the README's table is the table.md's last
+    one (`robots_table.py --goals 59`'s per-robot table) cell for cell, robots under their display names, with the
+    round's seeds, episode seeds, goals' tally and commands."""
     import re
 
     from conftest import ROOT
 
     text = readme()
-    assert "results/robots/legged_v2_2026-11-28" in text and "results/robots/tuning_v3_2026-11-29/README.md" in text
-    assert "goal 80%" not in text and "seeds 12 and 13" in text and "60000-60099" in text
-    assert "make robot RECIPE=legged_trot_v2" in text and len(text.splitlines()) <= 300
-    table = (ROOT / "results" / "robots" / "legged_v2_2026-11-28" / "table.md").read_text()
-    reported = {m.group(1): m.group(2) for m in re.finditer(r"^\| (\w+_seed1[23]) \|.*? 0\.25 l (\d+)%", table, re.M)}
-    names = {"A1": "a1", "Go2": "go2", "Spot": "spot", "Barkour vB": "barkour_vb", "Go1": "go1", "ANYmal B": "anymal_b"}
-    shown = {}
-    for robot, s12, s13 in re.findall(r"^\| ([\w ]+?) \(.*?\| 12 / 13 \| (\d+)% / (\d+)% \|", text, re.M):
-        shown[f"{names[robot]}_seed12"], shown[f"{names[robot]}_seed13"] = s12, s13
-    assert len(reported) == 12 and shown == reported, (shown, reported)
+    assert "results/robots/legged_v3_2026-12-02" in text and "docs/robots_round2.md" in text
+    assert "goal 80%" not in text and "seeds 14 and 15" in text and "62000-62099" in text
+    assert "make robot RECIPE=legged_trot_v3" in text and len(text.splitlines()) <= 300
+    table = (ROOT / "results" / "robots" / "legged_v3_2026-12-02" / "table.md").read_text()
+    last = [block for block in table.split("\n\n") if block.lstrip().startswith("|")][-1].strip().splitlines()
+    names = {"a1": "A1", "go2": "Go2", "spot": "Spot", "barkour_vb": "Barkour vB", "go1": "Go1", "anymal_b": "ANYmal B"}
+    rows = [re.sub(r"^\| (\w+) \(", lambda m: f"| {names[m.group(1)]} (", row) for row in last[2:]]
+    assert len(rows) == 6 and all(row in text.splitlines() for row in rows), rows
+    met = re.search(r"^Goals met: (\d+) of 84", text, re.M)
+    tally = sum(int(n) for row in rows for n in row.rstrip(" |").rsplit("|", 1)[1].split("/"))
+    assert met and int(met.group(1)) == tally, (met, tally)
 
 
 def test_the_readme_says_how_to_clone_shallow_shrink_make_robot_and_pick_envpool():

@@ -57,12 +57,6 @@ def layout_of(env_cfg) -> Layout:
     return LAYOUTS[task]
 
 
-def supported(env_cfg) -> bool:
-    from ppo_torchrl.envs_playground import task_id
-
-    return env_cfg.get("playground") is not None and task_id(env_cfg.id) in LAYOUTS
-
-
 @torch.no_grad()
 def track(cfg, ac, obs_stats, episodes: int, seed: int, commands=COMMANDS, settle_time: float = SETTLE,
           measure_time: float = MEASURE) -> dict:
@@ -72,7 +66,7 @@ def track(cfg, ac, obs_stats, episodes: int, seed: int, commands=COMMANDS, settl
     from ppo_torchrl.envs_playground import PlaygroundPool, pool_settings
     from ppo_torchrl.layout import ObservationLayout, Segment
     from ppo_torchrl.robots.model import read_robot
-    from ppo_torchrl.tasks.locomotion.evaluation import policy_of
+    from ppo_torchrl.array_policy import policy_of
 
     layout = layout_of(cfg.env)
     settings = pool_settings(cfg.env)
