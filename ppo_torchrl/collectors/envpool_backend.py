@@ -26,7 +26,7 @@ import numpy as np
 import torch
 from tensordict import TensorDict
 
-from ppo_torchrl.collectors.fast import FastCollector
+from ppo_torchrl.collectors.fast import Buffers, FastCollector
 from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.internals import OWN, worker_parts
 
@@ -128,29 +128,21 @@ class EnvpoolCollector(FastCollector):
         obs = self._current_obs()
         policy = self.numpy_policy
         policy.sync()
-        act_dim, obs_dim = policy.low.shape[0], obs.shape[1]
-        obs_buf = np.empty((steps, n, obs_dim), np.float32)
-        next_buf = np.empty((steps, n, obs_dim), np.float32)
-        act_buf = np.empty((steps, n, act_dim), np.float32)
+        act_dim = policy.low.shape[0]
+        b = Buffers(steps, n, obs.shape[1], act_dim)
         noise = self.rng.standard_normal((steps, n, act_dim), dtype=np.float32)
-        rew_buf = np.empty((steps, n), np.float32)
-        ep_return = np.empty((steps, n), np.float64)
-        ep_length = np.empty((steps, n), np.int64)
-        traj_buf = np.empty((steps, n), np.int64)
-        term_buf = np.empty((steps, n), bool)
-        trunc_buf = np.empty((steps, n), bool)
         every = np.arange(n)
         pool, act, normalize, scale_rewards = self.pool, policy.act, self.obs_norm, self.reward_norm
         for t in range(steps):
-            obs_buf[t] = obs
-            traj_buf[t] = self._traj_ids
-            act_buf[t], to_env = act(obs, noise[t])
+            b.obs[t] = obs
+            b.traj[t] = self._traj_ids
+            b.action[t], to_env = act(obs, noise[t])
             raw, reward, term, trunc, _ = self._ordered(pool.step(to_env.astype(np.float64), every), every)
             reward = reward.astype(np.float64)
             self.returns += reward
             self.lengths += 1
-            ep_return[t], ep_length[t] = self.returns, self.lengths
-            term_buf[t], trunc_buf[t] = term, trunc
+            b.ep_return[t], b.ep_length[t] = self.returns, self.lengths
+            b.terminated[t], b.truncated[t] = term, trunc
             done = term | trunc
             next_obs = obs = normalize(raw)
             if done.any():
@@ -164,11 +156,11 @@ class EnvpoolCollector(FastCollector):
                 self.returns[ended], self.lengths[ended] = 0.0, 0
                 for i in ended:
                     self._traj_ids[i] = self._traj_ids.max() + 1
-            next_buf[t] = next_obs
-            rew_buf[t] = scale_rewards(reward, done)
+            b.next_obs[t] = next_obs
+            b.reward[t] = scale_rewards(reward, done)
         self._obs = obs
         self.env_state.emit(obs)
-        return self._fill(obs_buf, act_buf, traj_buf, next_buf, rew_buf, term_buf, trunc_buf, ep_return, ep_length)
+        return self._fill(b)
 
     def load_state_dict(self, state_dict, **kwargs) -> None:
         """A saved state: the statistics and the RNG; EnvPool cannot restore a simulator state, so the saved

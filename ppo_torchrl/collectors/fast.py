@@ -33,6 +33,26 @@ from ppo_torchrl.layout import PRIVILEGED
 from ppo_torchrl.models import NumpyPolicy
 
 
+class Buffers:
+    """One rollout's arrays, [steps, num_envs, ...], written step by step; FastCollector._fill makes them the batch.
+    `privileged` and `privileged_next` only where the critic reads the privileged observation (privileged_dim)."""
+
+    def __init__(self, steps: int, n: int, obs_dim: int, act_dim: int, privileged_dim: Optional[int] = None):
+        self.obs = np.empty((steps, n, obs_dim), np.float32)
+        self.next_obs = np.empty((steps, n, obs_dim), np.float32)
+        self.action = np.empty((steps, n, act_dim), np.float32)
+        self.reward = np.empty((steps, n), np.float32)
+        self.ep_return = np.empty((steps, n), np.float64)  # the counters as Gymnasium keeps them: logged exactly
+        self.ep_length = np.empty((steps, n), np.int64)
+        self.traj = np.empty((steps, n), np.int64)
+        self.terminated = np.zeros((steps, n), bool)
+        self.truncated = np.zeros((steps, n), bool)
+        self.privileged = self.privileged_next = None
+        if privileged_dim is not None:
+            self.privileged = np.empty((steps, n, privileged_dim), np.float32)
+            self.privileged_next = np.empty_like(self.privileged)
+
+
 class FastCollector(Collector):
     def __init__(self, create_env_fn, policy=None, *, frames_per_batch: int, **kwargs):
         # One output TensorDict, filled in place by each rollout: TorchRL's worker processes then share its memory
@@ -85,35 +105,23 @@ class FastCollector(Collector):
         obs = self._current_obs()
         if steps:
             self.env_state.stepped()  # the steps below act on the last reset's observations
-        obs_dim = obs.shape[1]
         policy = self.numpy_policy
         policy.sync()
         act_dim = policy.low.shape[0]
-        obs_buf = np.empty((steps, n, obs_dim), np.float32)
-        next_buf = np.empty((steps, n, obs_dim), np.float32)
-        act_buf = np.empty((steps, n, act_dim), np.float32)
-        noise = self.rng.standard_normal((steps, n, act_dim), dtype=np.float32)
-        rew_buf = np.empty((steps, n), np.float32)
-        ep_return = np.empty((steps, n), np.float64)  # the counters as Gymnasium keeps them: logged exactly
-        ep_length = np.empty((steps, n), np.int64)
-        traj_buf = np.empty((steps, n), np.int64)
-        term_buf = np.zeros((steps, n), bool)
-        trunc_buf = np.zeros((steps, n), bool)
         rows = self.env_state.rows
         act, normalize, scale_rewards = policy.act, self.obs_norm, self.reward_norm
         pnorm, privileged = self.privileged_norm, self._privileged
-        if pnorm is not None:
-            privileged_buf = np.empty((steps, n, privileged.shape[1]), np.float32)
-            privileged_next_buf = np.empty_like(privileged_buf)
+        b = Buffers(steps, n, obs.shape[1], act_dim, None if pnorm is None else privileged.shape[1])
+        noise = self.rng.standard_normal((steps, n, act_dim), dtype=np.float32)
         for t in range(steps):
-            obs_buf[t] = obs
+            b.obs[t] = obs
             if pnorm is not None:
-                privileged_buf[t] = privileged
-            traj_buf[t] = self._traj_ids
-            act_buf[t], to_env = act(obs, noise[t])
-            raw_next, reward, term_buf[t], trunc_buf[t] = rows.step(to_env)  # every row, none reset
-            reset_rows = np.flatnonzero(term_buf[t] | trunc_buf[t]).tolist()
-            ep_return[t], ep_length[t] = self.env_state.episodes()  # each env's episode so far (before any reset)
+                b.privileged[t] = privileged
+            b.traj[t] = self._traj_ids
+            b.action[t], to_env = act(obs, noise[t])
+            raw_next, reward, b.terminated[t], b.truncated[t] = rows.step(to_env)  # every row, none reset
+            reset_rows = np.flatnonzero(b.terminated[t] | b.truncated[t]).tolist()
+            b.ep_return[t], b.ep_length[t] = self.env_state.episodes()  # each env's episode so far (before any reset)
             # The stats see every observation the env emits, as on TorchRL's path: each step's next
             # observation (a final one too), then the reset observation where an episode ended.
             next_obs = normalize(raw_next)
@@ -129,55 +137,45 @@ class FastCollector(Collector):
                     if pnorm is not None:
                         privileged[i] = pnorm(rows.privileged(slice(i, i + 1)))[0]
                     self._traj_ids[i] = self._traj_ids.max() + 1
-            next_buf[t] = next_obs
+            b.next_obs[t] = next_obs
             if pnorm is not None:
-                privileged_next_buf[t] = next_privileged
-            rew_buf[t] = scale_rewards(reward, term_buf[t] | trunc_buf[t])
+                b.privileged_next[t] = next_privileged
+            b.reward[t] = scale_rewards(reward, b.terminated[t] | b.truncated[t])
         self._obs, self._privileged = obs, privileged
         self.env_state.emit(obs, privileged=privileged)
-        out = self._fill(obs_buf, act_buf, traj_buf, next_buf, rew_buf, term_buf, trunc_buf, ep_return, ep_length)
-        if pnorm is not None:
-            self._fill_privileged(out, privileged_buf, privileged_next_buf)
-        return out
+        return self._fill(b)
 
-    def _fill(self, obs_buf, act_buf, traj_buf, next_buf, rew_buf, term_buf, trunc_buf, ep_return, ep_length):
+    def _fill(self, b: Buffers) -> TensorDict:
         """The batch in TorchRL's layout and keys, [num_envs, steps], from the rollout's [steps, num_envs] buffers,
-        written into the one output TensorDict."""
+        written into the one output TensorDict (the privileged observations too, where the critic reads them)."""
         n, steps = self.num_envs, self.steps
 
         def tensor(x: np.ndarray) -> torch.Tensor:  # [steps, n, ...] -> [n, steps, ...]
             return torch.from_numpy(np.ascontiguousarray(np.swapaxes(x, 0, 1)))
 
-        terminated, truncated = tensor(term_buf).unsqueeze(-1), tensor(trunc_buf).unsqueeze(-1)
+        terminated, truncated = tensor(b.terminated).unsqueeze(-1), tensor(b.truncated).unsqueeze(-1)
         batch = {
-            "observation": tensor(obs_buf),
-            "action": tensor(act_buf),
-            ("collector", "traj_ids"): tensor(traj_buf),
-            ("next", "observation"): tensor(next_buf),
-            ("next", "reward"): tensor(rew_buf).unsqueeze(-1),
+            "observation": tensor(b.obs),
+            "action": tensor(b.action),
+            ("collector", "traj_ids"): tensor(b.traj),
+            ("next", "observation"): tensor(b.next_obs),
+            ("next", "reward"): tensor(b.reward).unsqueeze(-1),
             ("next", "terminated"): terminated,
             ("next", "truncated"): truncated,
             ("next", "done"): terminated | truncated,
-            ("next", "episode_reward"): tensor(ep_return).unsqueeze(-1),
-            ("next", "step_count"): tensor(ep_length).unsqueeze(-1),
+            ("next", "episode_reward"): tensor(b.ep_return).unsqueeze(-1),
+            ("next", "step_count"): tensor(b.ep_length).unsqueeze(-1),
         }
+        if b.privileged is not None:
+            batch[PRIVILEGED], batch[("next", PRIVILEGED)] = tensor(b.privileged), tensor(b.privileged_next)
         if self._out is None:
             self._out = TensorDict(batch_size=[n, steps], device=self.storing_device)
-            for key, value in batch.items():
-                self._out.set(key, value.to(self.storing_device))
-        else:
-            for key, value in batch.items():
+        for key, value in batch.items():
+            if key in self._out.keys(True):
                 self._out.get(key).copy_(value)
-        return self._out
-
-    def _fill_privileged(self, out: TensorDict, privileged_buf: np.ndarray, privileged_next_buf: np.ndarray) -> None:
-        """The rollout's privileged observations ([steps, num_envs, P]) into the batch, [num_envs, steps, P]."""
-        for name, buf in ((PRIVILEGED, privileged_buf), (("next", PRIVILEGED), privileged_next_buf)):
-            value = torch.from_numpy(np.ascontiguousarray(np.swapaxes(buf, 0, 1))).to(self.storing_device)
-            if name in out.keys(True):
-                out.get(name).copy_(value)
             else:
-                out.set(name, value)
+                self._out.set(key, value.to(self.storing_device))
+        return self._out
 
     def state_dict(self):
         """TorchRL's (the env's EnvState: statistics, episodes, positions, the observation each env's policy acts

@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from ppo_torchrl.collectors.fast import FastCollector
+from ppo_torchrl.collectors.fast import Buffers, FastCollector
 from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.internals import OWN, worker_parts
 
@@ -103,37 +103,26 @@ class PlaygroundCollector(FastCollector):
         policy = self.numpy_policy
         policy.sync()
         key, privileged_key = shared.keys
-        act_dim, obs_dim = policy.low.shape[0], obs.shape[1]
-        obs_buf = np.empty((steps, n, obs_dim), np.float32)
-        next_buf = np.empty((steps, n, obs_dim), np.float32)
+        act_dim = policy.low.shape[0]
         pnorm = self.privileged_norm
-        if pnorm is not None:
-            privileged_buf = np.empty((steps, n, privileged.shape[1]), np.float32)
-            privileged_next_buf = np.empty_like(privileged_buf)
-        act_buf = np.empty((steps, n, act_dim), np.float32)
+        b = Buffers(steps, n, obs.shape[1], act_dim, None if pnorm is None else privileged.shape[1])
         noise = self.rng.standard_normal((steps, n, act_dim), dtype=np.float32)
-        rew_buf = np.empty((steps, n), np.float32)
-        ep_return = np.empty((steps, n), np.float64)
-        ep_length = np.empty((steps, n), np.int64)
-        traj_buf = np.empty((steps, n), np.int64)
-        term_buf = np.empty((steps, n), bool)
-        trunc_buf = np.empty((steps, n), bool)
         every = np.arange(n)
         act, normalize, scale_rewards = policy.act, self.obs_norm, self.reward_norm
         for t in range(steps):
-            obs_buf[t] = obs
+            b.obs[t] = obs
             if pnorm is not None:
-                privileged_buf[t] = privileged
-            traj_buf[t] = self._traj_ids
-            act_buf[t], to_env = act(obs, noise[t])
+                b.privileged[t] = privileged
+            b.traj[t] = self._traj_ids
+            b.action[t], to_env = act(obs, noise[t])
             raw, reward, term, trunc, info = shared.step(to_env, every)
             reward = reward.astype(np.float64)
             self.returns += reward
             self.lengths += 1
             self.term_sums += shared.episode_terms(info)
             self.command_sums += shared.command_figures(info)
-            ep_return[t], ep_length[t] = self.returns, self.lengths
-            term_buf[t], trunc_buf[t] = term, trunc
+            b.ep_return[t], b.ep_length[t] = self.returns, self.lengths
+            b.terminated[t], b.truncated[t] = term, trunc
             done = term | trunc
             next_obs = obs = normalize(raw[key])
             if pnorm is not None:
@@ -154,16 +143,13 @@ class PlaygroundCollector(FastCollector):
                 self._zero_counters(ended)
                 for i in ended:
                     self._traj_ids[i] = self._traj_ids.max() + 1
-            next_buf[t] = next_obs
+            b.next_obs[t] = next_obs
             if pnorm is not None:
-                privileged_next_buf[t] = next_privileged
-            rew_buf[t] = scale_rewards(reward, done)
+                b.privileged_next[t] = next_privileged
+            b.reward[t] = scale_rewards(reward, done)
         self._obs, self._privileged = obs, privileged
         self.env_state.emit(obs, privileged=privileged)
-        out = self._fill(obs_buf, act_buf, traj_buf, next_buf, rew_buf, term_buf, trunc_buf, ep_return, ep_length)
-        if pnorm is not None:
-            self._fill_privileged(out, privileged_buf, privileged_next_buf)
-        return out
+        return self._fill(b)
 
     def load_state_dict(self, state_dict, **kwargs) -> None:
         """A saved state: the statistics (the critic's too) and the RNG; EnvPool cannot restore a simulator state, so
