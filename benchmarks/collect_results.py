@@ -3,6 +3,9 @@ metrics.csv.xz (ppo_torchrl.records), plus the sweep report (PNG, markdown, CSV)
 
     python benchmarks/collect_results.py outputs/multirun/quality_1m results/quality_1m
     python benchmarks/collect_results.py --table results/quality_1m        # the table again, from the records
+
+A peer's rows recorded beside them (benchmarks/sb3_peer.py --out <dest>/sb3-ppo_seed<k>) are a row of the same table,
+named by their folder (`sb3-ppo`); they have no periodic evals ("-").
 """
 
 import json
@@ -72,7 +75,8 @@ def table(rows: dict) -> str:
         best = np.array([s["best_eval_return"] if s.get("best_eval_return") is not None else np.nan for s in runs])
         lines.append(f"| {env} | {','.join(str(s['seed']) for s in runs)} | {runs[0]['frames']:,} | "
                      f"{train.mean():.0f} +- {sample_std(train):.0f} | {', '.join(f'{x:.0f}' for x in train)} | "
-                     f"{evals.mean():.0f} +- {sample_std(evals):.0f} | {best.mean():.0f} +- {sample_std(best):.0f} | "
+                     f"{evals.mean():.0f} +- {sample_std(evals):.0f} | "
+                     f"{'-' if np.isnan(best).all() else f'{best.mean():.0f} +- {sample_std(best):.0f}'} | "
                      f"{np.mean([s['sps'] for s in runs]):.0f} | "
                      f"{np.mean([s['wall_s'] for s in runs]):.0f} |")
     return "\n".join(lines) + "\n"

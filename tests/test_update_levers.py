@@ -60,3 +60,31 @@ def test_a_run_with_the_kl_stop_logs_its_epochs_per_update(tiny_cfg, tmp_path):
     with open(tmp_path / "metrics.csv") as f:
         rows = list(csv.DictReader(f))
     assert [row["train/epochs"] for row in rows] == ["1", "1"]
+
+
+def test_the_sb3_peer_row_gets_every_value_sb3_has_a_knob_for_and_names_the_rest():
+    """benchmarks/sb3_peer.py (issue 75 item 3): HalfCheetah's env file, given to SB3's PPO: its batch, minibatch,
+    epochs, constant lr, gamma, lambda, clip, coefficients, layers, activation, init and normalization; what SB3 lacks
+    (the recompute lever) listed, not dropped in silence; a loss SB3's PPO is not, refused in one line."""
+    import sys
+
+    from conftest import ROOT, compose_config
+
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from sb3_peer import sb3_settings
+
+    ppo, norm, lacks = sb3_settings(compose_config(["env=HalfCheetah-v4", "advantage.recompute=true"]))
+    assert (ppo["n_steps"], ppo["batch_size"], ppo["n_epochs"], ppo["learning_rate"]) == (512, 64, 20, 2.0633e-05)
+    assert (ppo["gamma"], ppo["gae_lambda"], ppo["clip_range"], ppo["vf_coef"], ppo["max_grad_norm"]) == \
+        (0.98, 0.92, 0.1, 0.58096, 0.8)
+    kwargs = ppo["policy_kwargs"]
+    assert kwargs["net_arch"] == {"pi": [256, 256], "vf": [256, 256]} and kwargs["activation_fn"] is torch.nn.ReLU
+    assert (kwargs["ortho_init"], kwargs["log_std_init"]) == (False, -2.0)
+    assert norm == {"norm_obs": True, "norm_reward": True, "clip_obs": 10.0, "clip_reward": 10.0, "gamma": 0.98,
+                    "epsilon": 1e-8}
+    assert lacks == ["advantage.recompute=true (SB3: GAE once per batch)"]
+    hopper, _, none = sb3_settings(compose_config(["env=Hopper-v4"]))
+    assert hopper["learning_rate"](1.0) == 2e-4 and hopper["learning_rate"](0.5) == 1e-4 and none == []
+    assert hopper["policy_kwargs"]["net_arch"] == {"pi": [128, 128], "vf": [128, 128]}
+    with pytest.raises(ConfigError, match="clipped objective only"):
+        sb3_settings(compose_config(["env=Hopper-v4", "loss=a2c"]))
