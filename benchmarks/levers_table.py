@@ -16,6 +16,7 @@ import json
 import math
 import sys
 from pathlib import Path
+from typing import Optional
 
 from cli_args import ConfigError, Parser, out_file
 from cli_args import run as run_main
@@ -40,13 +41,37 @@ def mean_std(values: list) -> tuple:
     return mean, std
 
 
-def overrides(sweep: Path) -> str:
+def flat(config: dict, prefix: str = "") -> dict:
+    out = {}
+    for key, value in config.items():
+        if isinstance(value, dict):
+            out.update(flat(value, f"{prefix}{key}."))
+        else:
+            out[f"{prefix}{key}"] = value
+    return out
+
+
+def first_config(sweep: Path) -> Optional[dict]:
+    import yaml
+
+    first = next(iter(sorted(sweep.glob("*/config.yaml"))), None)
+    return None if first is None else flat(yaml.safe_load(first.read_text()))
+
+
+def overrides(sweep: Path, base: Optional[Path] = None) -> str:
+    """The sweep's overrides as Hydra recorded them (<run>/.hydra/overrides.yaml); for records without it, the keys
+    whose values differ from the base's config (seed, logger and run paths aside)."""
     import yaml
 
     first = next(iter(sorted(sweep.glob("*/.hydra/overrides.yaml"))), None)
-    if first is None:
+    if first is not None:
+        return " ".join(o for o in yaml.safe_load(first.read_text()) if not o.startswith(("seed=", "env=", "hydra.")))
+    mine, theirs = first_config(sweep), first_config(base) if base is not None and base != sweep else None
+    if mine is None or theirs is None:
         return ""
-    return " ".join(o for o in yaml.safe_load(first.read_text()) if not o.startswith(("seed=", "env=", "hydra.")))
+    skip = ("seed", "logger", "run_dir", "resume", "init_from")
+    return " ".join(f"{k}={v}" for k, v in mine.items()
+                    if theirs.get(k) != v and not k.split(".")[0] in skip and not k.startswith(skip))
 
 
 def decide(lever: list, base: list) -> str:
@@ -68,6 +93,7 @@ def table(entries: list) -> str:
     for env, items in by_env.items():
         found = {label: runs(sweep) for label, sweep in items}
         base = found.get("base", ({}, []))[0]
+        base_sweep = dict(items).get("base")
         base_returns = [s["train_return_last100"] for s in base.values()]
         lines += [f"## {env}", "", "| setting | overrides | train return, last 100 (per seed) | mean +- std | "
                   "final eval mean | wall s (mean) | decision |", "|---|---|---|---|---|---|---|"]
@@ -80,7 +106,7 @@ def table(entries: list) -> str:
             per_seed = ", ".join(f"{k}: {done[k]['train_return_last100']:.0f}" for k in sorted(done))
             decision = "baseline" if label == "base" else decide(returns, base_returns)
             note = f"; not finished: {', '.join(left)}" if left else ""
-            lines.append(f"| {label} | `{overrides(sweep)}` | {per_seed}{note} | {mean:.0f} +- {std:.0f} | "
+            lines.append(f"| {label} | `{overrides(sweep, base_sweep)}` | {per_seed}{note} | {mean:.0f} +- {std:.0f} | "
                          f"{mean_std(evals)[0]:.0f} | {mean_std(walls)[0]:.0f} | {decision} |")
         lines.append("")
     return "\n".join(lines)

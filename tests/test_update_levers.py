@@ -88,3 +88,19 @@ def test_the_sb3_peer_row_gets_every_value_sb3_has_a_knob_for_and_names_the_rest
     assert hopper["policy_kwargs"]["net_arch"] == {"pi": [128, 128], "vf": [128, 128]}
     with pytest.raises(ConfigError, match="clipped objective only"):
         sb3_settings(compose_config(["env=Hopper-v4", "loss=a2c"]))
+
+
+def test_the_levers_table_names_a_levers_override_from_its_records_config_when_hydra_left_none():
+    """Round 4's HalfCheetah E0 records (summary.json and config.yaml, no .hydra/) showed an empty overrides cell: the
+    cell is now the keys whose values differ from the base's config, and the decision is the PLAN's rule."""
+    import sys
+
+    from conftest import ROOT
+
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from levers_table import table
+
+    runs = ROOT / "results" / "quality_1m_round4_tuning_2026-12-02" / "runs"
+    text = table([("HalfCheetah-v4", "base", runs / "HalfCheetah-v4_base"), ("HalfCheetah-v4", "E0", runs / "HalfCheetah-v4_E0")])
+    row = next(line for line in text.splitlines() if line.startswith("| E0 |"))
+    assert "`loss.entropy_coef=0.0`" in row and "rejected (+288 against a margin of 791" in row, row
