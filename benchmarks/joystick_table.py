@@ -56,7 +56,7 @@ def rows(setting: Path) -> tuple:
         m = ROW.match(row.name)
         result = tracking(row)
         if result is None:
-            waiting.append(row.name)
+            waiting.append(f"{m['robot']} seed {int(m['seed'])}")
             continue
         summary = json.loads((row / "summary.json").read_text()) if (row / "summary.json").is_file() else {}
         done[(m["robot"], int(m["seed"]))] = (figures(result), summary)

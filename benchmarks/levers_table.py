@@ -106,7 +106,8 @@ def table(entries: list) -> str:
             per_seed = ", ".join(f"{k}: {done[k]['train_return_last100']:.0f}" for k in sorted(done))
             decision = "baseline" if label == "base" else decide(returns, base_returns)
             note = f"; not finished: {', '.join(left)}" if left else ""
-            lines.append(f"| {label} | `{overrides(sweep, base_sweep)}` | {per_seed}{note} | {mean:.0f} +- {std:.0f} | "
+            spread = f"{mean:.0f} +- {std:.0f}" if len(returns) > 1 else f"{mean:.0f} (one seed)"
+            lines.append(f"| {label} | `{overrides(sweep, base_sweep)}` | {per_seed}{note} | {spread} | "
                          f"{mean_std(evals)[0]:.0f} | {mean_std(walls)[0]:.0f} | {decision} |")
         lines.append("")
     return "\n".join(lines)

@@ -255,6 +255,11 @@ class LeggedConfig:
     # the curriculum showed (conf/env/legged.yaml sets it). whole: one running normalization over everything,
     # heights in world m: runs saved before the key existed (issue 59) trained so, and are evaluated so.
     obs_layout: str = "whole"
+    # The frame the trunk's attitude and linear velocity are observed in (tasks/locomotion/task.py, heading_frame).
+    # world: as Ant-v5 gives them (its quaternion, its world-frame velocity; every run before the key). heading:
+    # the trunk's own yaw taken out of both (a roll-and-pitch quaternion, the velocity in the heading frame the
+    # joystick's command is given in), so the policy reads the same state whichever way the robot faces.
+    obs_frame: str = "world"
     # step: a step across the path, its height from the curriculum in training and step_height in evaluation (the
     # climb recipes'); flat: flat ground, no step (the joystick's)
     terrain: str = "step"

@@ -30,7 +30,7 @@ from ppo_torchrl.normalization import (
 )
 from ppo_torchrl.env_rows import BatchRows, GymRows
 from ppo_torchrl.env_state import EnvState
-from ppo_torchrl.layout import OBS_LAYOUTS, privileged_layout_of
+from ppo_torchrl.layout import OBS_FRAMES, OBS_LAYOUTS, privileged_layout_of
 from ppo_torchrl.mjcf import FLOOR_DRAWN_M, MjcfInfo, check_mjcf, floor_to_the_horizon  # noqa: F401 (their home)
 from ppo_torchrl.positions import resumable
 
@@ -162,7 +162,8 @@ def mjcf_kwargs(env_cfg) -> dict:
         env_cfg = scaled_env(env_cfg, read_robot(path, env_cfg.legged.keyframe))
         robot = {"keyframe": env_cfg.legged.keyframe, "action_scale": env_cfg.legged.action_scale,
                  "saturation_cap": env_cfg.legged.get("saturation_cap", True),
-                 "obs_layout": env_cfg.legged.get("obs_layout", OBS_LAYOUTS[0])}
+                 "obs_layout": env_cfg.legged.get("obs_layout", OBS_LAYOUTS[0]),
+                 "obs_frame": env_cfg.legged.get("obs_frame", OBS_FRAMES[0])}
     loco = env_cfg.locomotion
     low, high = loco.healthy_z_range
     if not low < high:

@@ -38,6 +38,7 @@ PRIVILEGED = "privileged_observation"
 # env.legged.obs_layout (config.py): whole, the default (one running segment: runs saved before the key), or the
 # env's own segments (tasks/locomotion/task.py, LeggedTask.layout)
 OBS_LAYOUTS = ("whole", "segments")
+OBS_FRAMES = ("world", "heading")  # env.legged.obs_frame (config.py)
 
 
 @dataclass(frozen=True)

@@ -311,5 +311,76 @@ def test_the_tuning_table_keeps_a_lever_only_by_the_plans_rule(tmp_path):
     assert "baseline" in verdicts["base"]
     assert "kept (v_xy -0.050" in verdicts["better"] and "on 4 rows" in verdicts["better"]
     assert "rejected" in verdicts["falls"] and "falls beyond base's worst" in verdicts["falls"]
-    assert "| better | go1_seed8 | waiting" in text
+    assert "| better | go1 seed 8 | waiting" in text
     assert "| base | go1 seed 7 | 20,000,000 | 0.220 | 0.040 | 0% | 0% | forward 0.330 | 0.020 |" in text
+
+
+def _qmul(a, b):
+    w1, x1, y1, z1 = a
+    w2, x2, y2, z2 = b
+    return np.array([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
+
+
+def test_the_heading_frame_takes_the_trunks_yaw_out_of_its_attitude_and_velocity_whichever_way_it_faces():
+    """env.legged.obs_frame=heading: one tilted, moving trunk turned to five headings reads the same observation
+    (its roll-and-pitch quaternion, its velocity in its heading frame); the world frame's reading changes with it."""
+    from ppo_torchrl.tasks.locomotion.task import heading_frame
+
+    rng = np.random.default_rng(0)
+    # pitch then roll: the trunk's x axis stays in the world's xz plane (no yaw of its own)
+    tilt = _qmul([np.cos(0.12), 0, np.sin(0.12), 0], [np.cos(-0.09), np.sin(-0.09), 0, 0])
+    v_heading = np.array([0.7, -0.2, 0.05])
+    rows_q, rows_v = [], []
+    for yaw in (0.0, 0.5, 2.0, -2.9, 3.1):
+        q = _qmul([np.cos(yaw / 2), 0, 0, np.sin(yaw / 2)], tilt) * (-1 if yaw == 2.0 else 1)  # either sign
+        c, s = np.cos(yaw), np.sin(yaw)
+        v = np.array([c * v_heading[0] - s * v_heading[1], s * v_heading[0] + c * v_heading[1], v_heading[2]])
+        rows_q.append(np.concatenate([[0.3], q, rng.normal(size=12)]))
+        rows_v.append(np.concatenate([v, rng.normal(size=15)]))
+    qpos, qvel = np.array(rows_q), np.array(rows_v)
+    hq, hv = heading_frame(qpos, qvel)
+    yaw0 = np.arctan2(2 * (tilt[0] * tilt[3] + tilt[1] * tilt[2]), 1 - 2 * (tilt[2] ** 2 + tilt[3] ** 2))
+    assert abs(yaw0) < 1e-12  # the tilt has no yaw: it is what every row should read
+    np.testing.assert_allclose(hq[:, 1:5], np.tile(tilt, (5, 1)), atol=1e-12)
+    np.testing.assert_allclose(hv[:, :3], np.tile(v_heading, (5, 1)), atol=1e-12)
+    np.testing.assert_array_equal(hq[:, [0, *range(5, 17)]], qpos[:, [0, *range(5, 17)]])  # the rest as it is
+    np.testing.assert_array_equal(hv[:, 3:], qvel[:, 3:])
+    assert not np.allclose(qvel[1:, :2], v_heading[:2])  # the world frame's velocity turned with the trunk
+
+
+def test_policy_json_and_the_deploy_script_read_the_heading_frame_as_the_env_does():
+    """With obs_frame=heading policy.json names the tilt quaternion and the heading-frame velocity, and the standalone
+    script's observation equals the env's, element for element, after the trunk has turned."""
+    import mujoco
+
+    from ppo_torchrl.tasks.locomotion import deploy_mujoco
+    from ppo_torchrl.tasks.locomotion.deploy import manifest as make_manifest
+
+    cfg = joystick("env.legged.obs_frame=heading")
+    manifest = make_manifest(cfg)
+    names = [p["name"] for p in manifest["observation"]]
+    assert "trunk_tilt_quat_wxyz" in names and "trunk_linvel_heading" in names and "trunk_quat_wxyz" not in names
+    batch = LeggedBatchEnv(gym_make_kwargs(cfg.env), num_envs=1, threads=1)
+    batch.task.randomize.obs_noise = 0.0
+    batch.task.randomize.noise_scale[:] = 0.0
+    batch.reset(seed=4)
+    for _ in range(7):
+        batch.step(np.random.default_rng(0).uniform(-0.3, 0.3, (1, 12)).astype(np.float32))
+    command = batch.task.command.observe()[0]
+    t = batch.task.memory.clock_steps[0] * batch.world.dt
+    data = batch.datas[0]
+    mine = deploy_mujoco.observation(batch.models[0], data, manifest, command, t)
+    np.testing.assert_allclose(mine, batch.last_obs[0], rtol=0, atol=1e-12)
+    # turned by 1.3 rad about the world's z, the same state reads the same observation
+    turned = mujoco.MjData(batch.models[0])
+    turned.qpos[:], turned.qvel[:] = data.qpos, data.qvel
+    q = _qmul([np.cos(0.65), 0, 0, np.sin(0.65)], data.qpos[3:7])
+    turned.qpos[3:7] = q
+    c, s = np.cos(1.3), np.sin(1.3)
+    turned.qvel[0], turned.qvel[1] = c * data.qvel[0] - s * data.qvel[1], s * data.qvel[0] + c * data.qvel[1]
+    mujoco.mj_forward(batch.models[0], turned)
+    again = deploy_mujoco.observation(batch.models[0], turned, manifest, command, t)
+    skip = [p["name"] for p in manifest["observation"]].index("foot_contacts") if "foot_contacts" in names else None
+    size = sum(p["size"] for p in manifest["observation"][:skip]) if skip is not None else len(mine)
+    np.testing.assert_allclose(again[:size], mine[:size], atol=1e-9)

@@ -22,7 +22,7 @@ import math
 from omegaconf import OmegaConf
 
 from ppo_torchrl.errors import ConfigError
-from ppo_torchrl.layout import OBS_LAYOUTS
+from ppo_torchrl.layout import OBS_FRAMES, OBS_LAYOUTS
 from ppo_torchrl.robots.model import CONTACT_MODES, GRAVITY, Robot
 
 # env.locomotion / env.terrain keys env=legged derives (module doc), with the env.legged key each comes from
@@ -233,6 +233,9 @@ def legged_checks(legged) -> list:
     obs_layout = legged.get("obs_layout", OBS_LAYOUTS[0])
     checks.append((obs_layout in OBS_LAYOUTS, f"env.legged.obs_layout={obs_layout} is not known; use "
                    + " or ".join(OBS_LAYOUTS) + " (layout.py)"))
+    obs_frame = legged.get("obs_frame", OBS_FRAMES[0])
+    checks.append((obs_frame in OBS_FRAMES, f"env.legged.obs_frame={obs_frame} is not known; use "
+                   + " or ".join(OBS_FRAMES)))
     checks.append((legged.fall_height < legged.too_high,
                    f"env.legged.fall_height={legged.fall_height} must be under env.legged.too_high={legged.too_high}"))
     checks.append((legged.gait_period is None or legged.gait_period > 0,

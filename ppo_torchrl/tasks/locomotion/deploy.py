@@ -6,7 +6,8 @@ and mujoco: no ppo_torchrl), which is the deploy check.
 The observation, in order (sizes for a 12-joint quadruped): the trunk's height (1, m above the world's z = 0), its
 attitude quaternion (4, w x y z, world frame), the joint angles (nq - 7, the model's qpos order), the trunk's linear
 velocity (3, world frame, m/s) and angular velocity (3, the trunk's own frame, rad/s: a free joint's qvel), the joint
-speeds (nv - 6), then, where the run had them, a 0/1 ground contact per foot, terrain heights ahead (flat ground: 0 -
+speeds (nv - 6) (a run with env.legged.obs_frame=heading: the quaternion with the trunk's yaw taken out,
+`trunk_tilt_quat_wxyz`, and the linear velocity in the trunk's heading frame, `trunk_linvel_heading`), then, where the run had them, a 0/1 ground contact per foot, terrain heights ahead (flat ground: 0 -
 the trunk's height), the command (vx, vy in the trunk's heading frame over sqrt(g l), the yaw rate over sqrt(g / l)),
 and the trot clock (sin, cos of 2 pi x the phase, the phase = time since the episode began / period, mod 1). The
 normalization is inside policy.pt. The action, in [-1, 1] per actuator: each joint's target angle = its standing
@@ -31,7 +32,9 @@ def manifest(cfg) -> dict:
         robot, model = world.robot, world.model
         segments = [{"name": s.name, "size": s.size} for s in task.layout().segments] if task.segments else []
         nq, nv = model.nq, model.nv
-        parts = [["trunk_height", 1], ["trunk_quat_wxyz", 4], ["joint_angles", nq - 7], ["trunk_linvel_world", 3],
+        tilt = task.heading_frame  # env.legged.obs_frame=heading: the trunk's yaw taken out of both
+        parts = [["trunk_height", 1], ["trunk_tilt_quat_wxyz" if tilt else "trunk_quat_wxyz", 4],
+                 ["joint_angles", nq - 7], ["trunk_linvel_heading" if tilt else "trunk_linvel_world", 3],
                  ["trunk_angvel_local", 3], ["joint_speeds", nv - 6]]
         if task.observe_contacts:
             parts.append(["foot_contacts", len(world.feet)])

@@ -28,8 +28,17 @@ NOISE = {"height_attitude": 0.02, "joint_angle": 0.03, "linear": 0.05, "angular"
 
 def observation(model, data, manifest: dict, command, time_s: float) -> np.ndarray:
     """The observation policy.json describes, for the state in `data` and `command` (robot units)."""
-    parts = [data.qpos[2:], data.qvel]
+    qpos, qvel = data.qpos[2:].copy(), data.qvel.copy()
     names = [p["name"] for p in manifest["observation"]]
+    if "trunk_tilt_quat_wxyz" in names:  # the trunk's yaw taken out of its attitude and its linear velocity
+        w, x, y, z = qpos[1:5]
+        yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+        c, s = math.cos(0.5 * yaw), math.sin(0.5 * yaw)
+        tilt = np.array([c * w + s * z, c * x + s * y, c * y - s * x, c * z - s * w])
+        qpos[1:5] = -tilt if tilt[0] < 0 else tilt
+        cy, sy = math.cos(yaw), math.sin(yaw)
+        qvel[0], qvel[1] = cy * data.qvel[0] + sy * data.qvel[1], -sy * data.qvel[0] + cy * data.qvel[1]
+    parts = [qpos, qvel]
     if "foot_contacts" in names:
         feet = manifest["feet_geoms"]
         flags = np.zeros(len(feet))

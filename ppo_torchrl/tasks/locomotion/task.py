@@ -3,7 +3,8 @@ the contact sensors (sensors.py), the episode memory (memory.py) and the named r
 what the physics left in each row (`Reading`), it computes the observation, the reward and each term, and why an
 episode ends, as arrays over the rows; the batched env (batch.py) steps the physics and resets the rows.
 
-The observation: Gymnasium Ant-v5's (the trunk's height and attitude, the joint angles, all velocities; the
+The observation: Gymnasium Ant-v5's (the trunk's height and attitude, the joint angles, all velocities; with
+env.legged.obs_frame=heading the attitude and linear velocity with the trunk's yaw taken out, `heading_frame`; the
 clipped contact forces where asked), then the opt-in extras: a 0/1 contact flag per foot, terrain heights at
 points ahead of the trunk along the heading (relative to the trunk with env.legged.obs_layout=segments), the
 command's segment, the trot clock's sin and cos. `layout()` says how each segment is scaled (layout.py).
@@ -56,6 +57,24 @@ WORLD_DRAW = ("friction", "trunk_mass", "com", "strength", "delayed")  # the pri
 NOMINAL_DRAW = {"friction": 1.0, "trunk_mass": 1.0, "com": [0.0, 0.0, 0.0], "strength": 1.0, "delayed": False}
 
 
+def heading_frame(qpos: np.ndarray, qvel: np.ndarray) -> tuple:
+    """(qpos[2:], qvel) of free-joint trunks, [N, nq - 2] and [N, nv], with each trunk's yaw taken out
+    (env.legged.obs_frame=heading): the attitude quaternion (w x y z) becomes conj(q_yaw) q, the roll and pitch left
+    once the yaw about the world's z is removed (w >= 0), and the linear velocity is turned into the heading frame,
+    the frame the joystick's command is given in; the yaw is the trunk's x axis's angle on the ground, as `motion`
+    reads it. Height, joint angles, the trunk's own-frame angular velocity and the joint speeds are as they are."""
+    qpos, qvel = qpos.copy(), qvel.copy()
+    w, x, y, z = qpos[:, 1], qpos[:, 2], qpos[:, 3], qpos[:, 4]
+    yaw = np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    c, s = np.cos(0.5 * yaw), np.sin(0.5 * yaw)
+    tilt = np.stack([c * w + s * z, c * x + s * y, c * y - s * x, c * z - s * w], axis=1)
+    qpos[:, 1:5] = tilt * np.where(tilt[:, :1] < 0, -1.0, 1.0)
+    cy, sy = np.cos(yaw), np.sin(yaw)
+    vx, vy = qvel[:, 0].copy(), qvel[:, 1].copy()
+    qvel[:, 0], qvel[:, 1] = cy * vx + sy * vy, -sy * vx + cy * vy
+    return qpos, qvel
+
+
 class LeggedTask:
     def __init__(self, n: int, world, kwargs: dict, evaluation: bool, privileged: bool = False):
         legged, terrain = dict(kwargs.get("legged") or {}), dict(kwargs.get("terrain") or {})
@@ -78,6 +97,7 @@ class LeggedTask:
         self.height_samples = int(terrain.get("height_samples") or 0)
         self._offsets = float(terrain.get("height_sample_spacing") or 0.1) * np.arange(self.height_samples)
         self.segments = (kwargs.get("robot") or {}).get("obs_layout") == "segments"
+        self.heading_frame = (kwargs.get("robot") or {}).get("obs_frame") == "heading"
         self.period = None if legged.get("gait_period") is None else float(legged["gait_period"])
         if self.period is None and weights["gait_clock"]:
             raise ConfigError("env.locomotion.gait_clock_weight needs env.locomotion.gait_period (s)")
@@ -133,7 +153,8 @@ class LeggedTask:
     def observe(self, r: Reading, rows=slice(None)) -> np.ndarray:
         """The observation of rows `rows` (all by default) from their reading."""
         m = self.memory
-        parts = [r.qpos[rows, 2:], r.qvel[rows]]
+        parts = list(heading_frame(r.qpos[rows, 2:], r.qvel[rows])) if self.heading_frame else \
+            [r.qpos[rows, 2:], r.qvel[rows]]
         if self.include_cfrc:
             parts.append(np.clip(r.cfrc_ext[rows, 1:], -1.0, 1.0).reshape(len(parts[0]), -1))
         if self.observe_contacts:
