@@ -54,6 +54,14 @@ def test_a_planted_2mb_file_fails_the_check_until_it_is_allow_listed(tmp_path, m
                           capture_output=True).returncode == 1
     (tmp_path / ".ci" / "large_files.txt").write_text("results/big.pt  # why\n")
     assert check.findings(tmp_path) == []
+    for name in ("results/row/metrics.csv", "results/row/checkpoints/best.pt"):  # a training row's working files
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).write_text("working\n")
+        git(tmp_path, "add", name)
+        assert check.findings(tmp_path) == [f"{name} is a training row's working file: commit its record instead "
+                                            "(the curve as metrics.csv.xz: `xz -9`, then benchmarks/thin_metrics.py "
+                                            "once the row is finished; checkpoints/last.pt)"]
+        git(tmp_path, "rm", "-q", "--cached", name)
     monkeypatch.setattr(check, "TREE_LIMIT", 1_000_000)  # the tree's budget
     assert check.findings(tmp_path)[-1].startswith("the tracked tree is 1.9 MiB")
 

@@ -6,8 +6,9 @@ and mujoco: no ppo_torchrl), which is the deploy check.
 The observation, in order (sizes for a 12-joint quadruped): the trunk's height (1, m above the world's z = 0), its
 attitude quaternion (4, w x y z, world frame), the joint angles (nq - 7, the model's qpos order), the trunk's linear
 velocity (3, world frame, m/s) and angular velocity (3, the trunk's own frame, rad/s: a free joint's qvel), the joint
-speeds (nv - 6) (a run with env.legged.obs_frame=heading: the quaternion with the trunk's yaw taken out,
-`trunk_tilt_quat_wxyz`, and the linear velocity in the trunk's heading frame, `trunk_linvel_heading`), then, where the run had them, a 0/1 ground contact per foot, terrain heights ahead (flat ground: 0 -
+speeds (nv - 6) (a run with env.legged.obs_frame=heading has, in the same places, the quaternion with the trunk's
+yaw taken out, `trunk_tilt_quat_wxyz`, and the linear velocity in the trunk's heading frame, `trunk_linvel_heading`),
+then, where the run had them, a 0/1 ground contact per foot, terrain heights ahead (flat ground: 0 -
 the trunk's height), the command (vx, vy in the trunk's heading frame over sqrt(g l), the yaw rate over sqrt(g / l)),
 and the trot clock (sin, cos of 2 pi x the phase, the phase = time since the episode began / period, mod 1). The
 normalization is inside policy.pt. The action, in [-1, 1] per actuator: each joint's target angle = its standing
