@@ -134,6 +134,17 @@ def test_the_tracking_error_of_a_robot_that_stands_is_its_command():
     assert rows["forward"]["falls"] == 0.0 and result["overall"]["episodes"] == 3
 
 
+def _stepped_without_noise(cfg):
+    """One Go1 row of the batched env, without its training noise, seven random steps on: (env, command, clock)."""
+    batch = LeggedBatchEnv(gym_make_kwargs(cfg.env), num_envs=1, threads=1)
+    batch.task.randomize.obs_noise = 0.0
+    batch.task.randomize.noise_scale[:] = 0.0
+    batch.reset(seed=4)
+    for _ in range(7):
+        batch.step(np.random.default_rng(0).uniform(-0.3, 0.3, (1, 12)).astype(np.float32))
+    return batch, batch.task.command.observe()[0], batch.task.memory.clock_steps[0] * batch.world.dt
+
+
 def test_policy_json_is_the_observation_the_env_gives_and_the_deploy_script_drives_the_export(tmp_path):
     """The layout export writes down is the env's own observation, element for element (from the same state), and
     the standalone script (torch and mujoco only) drives policy.pt and policy.onnx alike in plain MuJoCo."""
@@ -153,14 +164,7 @@ def test_policy_json_is_the_observation_the_env_gives_and_the_deploy_script_driv
     assert [p.name for p in written] == ["policy.onnx", "policy.json", "deploy_mujoco.py"]
     manifest = json.loads((tmp_path / "policy.json").read_text())
     assert sum(p["size"] for p in manifest["observation"]) == manifest["obs_dim"]
-    batch = LeggedBatchEnv(gym_make_kwargs(cfg.env), num_envs=1, threads=1)
-    batch.task.randomize.obs_noise = 0.0  # the env's observation without its training noise
-    batch.task.randomize.noise_scale[:] = 0.0
-    batch.reset(seed=4)
-    for _ in range(7):
-        batch.step(np.random.default_rng(0).uniform(-0.3, 0.3, (1, 12)).astype(np.float32))
-    command = batch.task.command.observe()[0]
-    t = batch.task.memory.clock_steps[0] * batch.world.dt
+    batch, command, t = _stepped_without_noise(cfg)
     mine = deploy_mujoco.observation(batch.models[0], batch.datas[0], manifest, command, t)
     np.testing.assert_allclose(mine, batch.last_obs[0], rtol=0, atol=1e-12)
     outputs = []
@@ -361,14 +365,7 @@ def test_policy_json_and_the_deploy_script_read_the_heading_frame_as_the_env_doe
     manifest = make_manifest(cfg)
     names = [p["name"] for p in manifest["observation"]]
     assert "trunk_tilt_quat_wxyz" in names and "trunk_linvel_heading" in names and "trunk_quat_wxyz" not in names
-    batch = LeggedBatchEnv(gym_make_kwargs(cfg.env), num_envs=1, threads=1)
-    batch.task.randomize.obs_noise = 0.0
-    batch.task.randomize.noise_scale[:] = 0.0
-    batch.reset(seed=4)
-    for _ in range(7):
-        batch.step(np.random.default_rng(0).uniform(-0.3, 0.3, (1, 12)).astype(np.float32))
-    command = batch.task.command.observe()[0]
-    t = batch.task.memory.clock_steps[0] * batch.world.dt
+    batch, command, t = _stepped_without_noise(cfg)
     data = batch.datas[0]
     mine = deploy_mujoco.observation(batch.models[0], data, manifest, command, t)
     np.testing.assert_allclose(mine, batch.last_obs[0], rtol=0, atol=1e-12)
