@@ -485,6 +485,13 @@ def stale_eval(tree, run: Path, ev: Path, real: bool):
         f"{[made.get(k) for k in keys]} there, {[fresh.get(k) for k in keys]} from the checkpoint now"
 
 
+def answer(proc) -> None:
+    """Let a command paused at a claim step (HOOK) go on."""
+    with contextlib.suppress(OSError, ValueError):  # it ended meanwhile (a closed pipe)
+        proc.stdin.write("go\n")
+        proc.stdin.flush()
+
+
 def claim_cut(tree, rng, real) -> tuple:
     """A claim stopped at its step k by kill -9 or Ctrl-C; then resume, or the same overwrite, let finish."""
     top = tree.root / rng.choice(RUNS)
@@ -497,10 +504,12 @@ def claim_cut(tree, rng, real) -> tuple:
         if line.startswith("claim-step"):
             if n == k:
                 os.killpg(proc.pid, signum)
+                # A Ctrl-C the app defers (the loop's StopRequest: stop after this iteration) leaves it waiting on
+                # this step's line, where a real rename would have gone on: answer it after a while, so the command
+                # ends by itself (or hangs by its own fault, which the 300 s bound still catches).
+                threading.Timer(5, answer, (proc,)).start()
             else:
-                with contextlib.suppress(OSError):  # it ended meanwhile
-                    proc.stdin.write("go\n")
-                    proc.stdin.flush()
+                answer(proc)
             n += 1
     code, err = ended(proc)
     hung = hang.finished.is_set()  # before cancel(): set only if the timer fired

@@ -117,8 +117,9 @@ def table(entries: list) -> str:
         per_robot = ", ".join(f"{r} {mean_std([done[k][0]['v_xy'] for k in done if k[0] == r])[0]:.3f}" for r in robots)
         mean, std = mean_std(values)
         decision = "baseline" if label == "base" else decide(done, base)
-        verdicts.append(f"- **{label}**: v_xy {fmt(mean)} +- {fmt(std)} over {len(values)} rows ({per_robot}); "
-                        f"{decision}")
+        spread = f"{fmt(mean)} +- {fmt(std)} over {len(values)} rows" if len(values) > 1 else (
+            f"{fmt(mean)} (one row)" if values else "no row yet")
+        verdicts.append(f"- **{label}**: v_xy {spread} ({per_robot}); {decision}")
     return "\n".join(lines + [""] + verdicts) + "\n"
 
 

@@ -332,7 +332,10 @@ def check_new_dir(directory: Path, overwrite: bool, what: str = "run") -> None:
         raise ConfigError(f"{directory} is not empty and is not a ppo_torchrl {what} dir (it holds {shown or 'folders'}, "
                           f"which this app did not write); pick an empty or new dir with {key}=<dir>")
     if not overwrite:
-        hint = f"continue it with resume={directory}, " if what == "run" else ""
+        hint = ""
+        if what == "run":  # resume needs a checkpoint: a run killed before its first one has nothing to continue
+            hint = (f"continue it with resume={directory}, " if (directory / "checkpoints" / "last.pt").is_file()
+                    else "it has no checkpoints/last.pt (nothing to resume): ")
         raise ConfigError(f"{directory} already holds a {what}: {hint}pick a new dir with {key}=<dir>, "
                           "or replace it with overwrite=true")
 

@@ -310,12 +310,15 @@ def test_the_tuning_table_keeps_a_lever_only_by_the_plans_rule(tmp_path):
         row("better", name, v - 0.05)
         row("falls", name, v - 0.05, falls=0.2 if name == "go1_seed7" else 0.0)
     (tmp_path / "better" / "go1_seed8").mkdir()
-    text = joystick_table.table([(label, tmp_path / label) for label in ("base", "better", "falls")])
+    row("single", "go1_seed6", 0.15)  # one row has no sample std: said, not "+- nan"
+    (tmp_path / "waits" / "go1_seed6").mkdir(parents=True)
+    text = joystick_table.table([(label, tmp_path / label) for label in ("base", "better", "falls", "single", "waits")])
     verdicts = {line.split("**")[1]: line for line in text.splitlines() if line.startswith("- **")}
     assert "baseline" in verdicts["base"]
     assert "kept (v_xy -0.050" in verdicts["better"] and "on 4 rows" in verdicts["better"]
     assert "rejected" in verdicts["falls"] and "falls beyond base's worst" in verdicts["falls"]
     assert "| better | go1 seed 8 | waiting" in text
+    assert "v_xy 0.150 (one row)" in verdicts["single"] and "nan" not in text and "no row yet" in verdicts["waits"]
     assert "| base | go1 seed 7 | 20,000,000 | 0.220 | 0.040 | 0% | 0% | forward 0.330 | 0.020 |" in text
 
 

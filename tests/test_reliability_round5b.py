@@ -402,3 +402,21 @@ def test_a_record_checkpoint_evaluates_and_inits_but_says_it_cannot_resume(finis
     tiny = ["env=InvertedPendulum-v4", "collector.total_frames=256", "collector.frames_per_batch=256", "loss.epochs=1",
             "eval.every_frames=0", "eval.final_episodes=1", "eval.video=false", "logger=none", f"init_from={last}"]
     assert ppo_torchrl.train(tiny, run_dir=tmp_path / "on").summary["frames"] == 256
+
+
+def test_a_run_killed_before_its_first_checkpoint_is_not_offered_resume(finished_run, tmp_path):
+    """kill -9 in a run's first minute leaves a run dir with no checkpoints/last.pt: the same command said "continue
+    it with resume=<dir>", and resume then said the dir needs checkpoints/last.pt. Now it says there is nothing to
+    resume and offers the two commands that work."""
+    import shutil
+
+    from ppo_torchrl.errors import ConfigError
+    from ppo_torchrl.lifecycle import Lifecycle
+
+    run = copy_of(finished_run, tmp_path)
+    shutil.rmtree(run / "checkpoints")
+    with pytest.raises(ConfigError, match="no checkpoints/last.pt .nothing to resume.") as refused_new:
+        Lifecycle().claim(run)
+    assert "resume=" not in str(refused_new.value) and "overwrite=true" in str(refused_new.value)
+    with pytest.raises(ConfigError, match="needs checkpoints/last.pt"):  # and resume says the same
+        Lifecycle().resume(str(run), [])
