@@ -49,9 +49,9 @@ def recorded_runs(dest: Path) -> dict:
     return rows
 
 
-def sample_std(x: np.ndarray) -> float:
-    """The +- of every results table: the sample std over seeds (ddof=1)."""
-    return float(x.std(ddof=1)) if len(x) > 1 else 0.0
+def mean_pm(x: np.ndarray) -> str:
+    """A cell of every results table: the mean +- the sample std over seeds (ddof=1); one seed has no spread to show."""
+    return f"{x.mean():.0f} +- {x.std(ddof=1):.0f}" if len(x) > 1 else f"{x.mean():.0f} (one seed)"
 
 
 def main(sweep: Path, dest: Path) -> None:
@@ -74,9 +74,8 @@ def table(rows: dict) -> str:
         evals = np.array([s["eval_return_mean"] for s in runs])
         best = np.array([s["best_eval_return"] if s.get("best_eval_return") is not None else np.nan for s in runs])
         lines.append(f"| {env} | {','.join(str(s['seed']) for s in runs)} | {runs[0]['frames']:,} | "
-                     f"{train.mean():.0f} +- {sample_std(train):.0f} | {', '.join(f'{x:.0f}' for x in train)} | "
-                     f"{evals.mean():.0f} +- {sample_std(evals):.0f} | "
-                     f"{'-' if np.isnan(best).all() else f'{best.mean():.0f} +- {sample_std(best):.0f}'} | "
+                     f"{mean_pm(train)} | {', '.join(f'{x:.0f}' for x in train)} | {mean_pm(evals)} | "
+                     f"{'-' if np.isnan(best).all() else mean_pm(best)} | "
                      f"{np.mean([s['sps'] for s in runs]):.0f} | "
                      f"{np.mean([s['wall_s'] for s in runs]):.0f} |")
     return "\n".join(lines) + "\n"
