@@ -17,10 +17,9 @@ from typing import Optional
 import torch
 
 from ppo_torchrl.errors import ConfigError
-from ppo_torchrl.rundir import atomic_write_bytes, moved_aside
+from ppo_torchrl.rundir import CHECKPOINTS, LAST, atomic_write_bytes, moved_aside
 from ppo_torchrl.safe_pickle import load_torch, refused_name
 
-LAST = "last.pt"
 BEST = "best.pt"
 
 
@@ -105,7 +104,7 @@ def resolve_checkpoint(run_dir: Path, which: str) -> Path:
     without one (no eval saved it: zoo/quadruped_climb ships last.pt alone) is `last`, said on stderr;
     a checkpoint that is not there is one line naming the ones that are."""
     run_dir = Path(run_dir)
-    found = run_dir / "checkpoints"
+    found = run_dir / CHECKPOINTS
     if not found.is_dir():  # the sibling an overwrite moved the run to is looked for only then
         aside = moved_aside(run_dir)
         moved = f"; overwrite=true moved the run that was there to {aside}: run={aside}" if aside else ""

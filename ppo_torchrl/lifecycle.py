@@ -98,10 +98,10 @@ class Lifecycle:
         if rundir.shipped(run_dir):
             raise ConfigError(f"resume={run_dir}: a shipped zoo policy is read-only; train on from it in a dir of your "
                               f"own with init_from={run_dir}")
-        if not (run_dir / "checkpoints" / checkpoint.LAST).is_file():
+        if not rundir.last_checkpoint(run_dir).is_file():
             stopped = [d for d in sorted(run_dir.glob("seed*")) if rundir.is_run(d) and unfinished(d)]
             if (run_dir / "trial.json").is_file() or stopped:  # a trial_seeds run: its seeds are runs of their own
-                resumable = [d for d in stopped if (d / "checkpoints" / checkpoint.LAST).is_file()]
+                resumable = [d for d in stopped if rundir.last_checkpoint(d).is_file()]
                 then = (f"resume={resumable[0]} continues its stopped seed" if resumable else
                         f"its {stopped[0].name} stopped before its first checkpoint (nothing to resume)" if stopped
                         else "its seeds are all finished")
@@ -111,8 +111,8 @@ class Lifecycle:
                 raise ConfigError(f"resume={run_dir} is a trial of several seeds (trial.json), each seed a run of its "
                                   f"own: {then}; {again}")
             raise ConfigError(f"resume={run_dir} is not a ppo_torchrl run dir with a checkpoint: it needs "
-                              f"checkpoints/last.pt{moved}")
-        state = checkpoint.load(run_dir / "checkpoints" / checkpoint.LAST)
+                              f"{rundir.CHECKPOINTS}/{rundir.LAST}{moved}")
+        state = checkpoint.load(rundir.last_checkpoint(run_dir))
         if "optimizer" not in state:  # records.record_checkpoint: a reported row's, kept light
             raise ConfigError(f"resume={run_dir}: its last.pt is a record checkpoint (no optimizer state); train on "
                               f"from it with init_from={run_dir} in a dir of your own")

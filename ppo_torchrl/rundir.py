@@ -40,6 +40,14 @@ from typing import Dict, List, Optional
 from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.ownership import MANIFEST, digest, holder, inside_run, relative, walk
 
+CHECKPOINTS = "checkpoints"  # a run dir's checkpoint folder
+LAST = "last.pt"  # in it, the checkpoint a resume continues from
+
+
+def last_checkpoint(run_dir: Path) -> Path:
+    """The checkpoint `resume=<run_dir>` continues from."""
+    return Path(run_dir) / CHECKPOINTS / LAST
+
 STASH = ".replaced"  # earlier versions moved an overwritten run's files here; one left by a kill is moved aside whole
 ASIDE = ".replaced-"  # overwrite=true: <dir>.replaced-<time> holds the run it replaced
 LEGACY_LOCK = ".lock"  # earlier versions locked a file of this name; a leftover one is ours
@@ -322,7 +330,7 @@ def check_new_dir(directory: Path, overwrite: bool, what: str = "run") -> None:
             if files_in(job):
                 foreign += [f"{job.name}/{f}" for f in foreign_files(job)]
         has_run = is_run(directory) or any(is_run(job) for job in job_dirs(directory))
-    legacy = {"metrics.csv", "summary.json", "checkpoints/last.pt"} & set(foreign)  # what every run wrote
+    legacy = {"metrics.csv", "summary.json", f"{CHECKPOINTS}/{LAST}"} & set(foreign)  # what every run wrote
     if what == "run" and not has_run and legacy and all(OWNED.match(f) for f in foreign):
         raise ConfigError(f"{directory} holds a run of an earlier version, which listed no files: overwrite=true cannot "
                           f"tell its files from yours; continue it with resume={directory}, pick a new dir with "
@@ -334,8 +342,8 @@ def check_new_dir(directory: Path, overwrite: bool, what: str = "run") -> None:
     if not overwrite:
         hint = ""
         if what == "run":  # resume needs a checkpoint: a run killed before its first one has nothing to continue
-            hint = (f"continue it with resume={directory}, " if (directory / "checkpoints" / "last.pt").is_file()
-                    else "it has no checkpoints/last.pt (nothing to resume): ")
+            hint = (f"continue it with resume={directory}, " if last_checkpoint(directory).is_file()
+                    else f"it has no {CHECKPOINTS}/{LAST} (nothing to resume): ")
         raise ConfigError(f"{directory} already holds a {what}: {hint}pick a new dir with {key}=<dir>, "
                           "or replace it with overwrite=true")
 

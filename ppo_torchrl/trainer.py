@@ -110,7 +110,7 @@ class Trainer:
 
     def _set_up(self, cfg, resume: Optional[dict]) -> None:
         self.logger = make_logger(cfg.logger, self.run_dir, run_name=f"{cfg.env.id}_seed{cfg.seed}_{self.run_dir.name}")
-        self.ckpt = CheckpointManager(self.run_dir / "checkpoints", cfg.checkpoint.keep_last, cfg.checkpoint.save_best)
+        self.ckpt = CheckpointManager(self.run_dir / rundir.CHECKPOINTS, cfg.checkpoint.keep_last, cfg.checkpoint.save_best)
 
         self.frames = 0
         self.iteration = 0
