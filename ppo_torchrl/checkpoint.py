@@ -133,6 +133,22 @@ def label(path: Path) -> str:
     return {BEST: "best", LAST: "last"}.get(Path(path).name, Path(path).stem)
 
 
+def note_older_best(best: Path, state: dict) -> None:
+    """best.pt is the policy of the highest in-training eval return, which on a task whose return is not its goal can
+    be an early one (a joystick run's robot standing still at 1M frames of 20M): one stderr line when the run's
+    last.pt holds more frames, naming checkpoint=last, so nobody films or exports an early policy unawares."""
+    last = best.with_name(LAST)
+    try:
+        final = load(last).get("frames", 0) if last.is_file() else 0
+    except ConfigError:  # a damaged last.pt: best.pt is still what was asked for, and said as it is
+        return
+    if final > state["frames"]:
+        score = state.get("best_eval_return")
+        print(f"note: best.pt is the policy at {state['frames']:,} of the run's {final:,} frames (its highest "
+              f"in-training eval return{f', {score:.1f}' if score is not None else ''}); checkpoint=last is the final "
+              "one", file=sys.stderr, flush=True)
+
+
 def load_policy(run_dir: Path, which: str = "best"):
     """(config, actor-critic with the checkpoint's weights, checkpoint state) of a finished run."""
     from ppo_torchrl.config import run_config
@@ -141,6 +157,8 @@ def load_policy(run_dir: Path, which: str = "best"):
 
     path = resolve_checkpoint(run_dir, which)
     state = load(path)
+    if path.name == BEST:
+        note_older_best(path, state)
     cfg = run_config(run_dir, state, announce=True)  # the checkpoint's config, not a damaged config.yaml's
     spec = env_spec(cfg.env)
     check_spec(state, spec, cfg.env.id)

@@ -284,6 +284,27 @@ def test_report_marks_each_eval_and_says_what_each_train_curve_averages(tmp_path
 
 
 
+def test_an_early_best_checkpoint_is_named_as_such(trained_run, tmp_path, capsys):
+    """best.pt older than last.pt (a joystick run's best can be its 1M-frame stander of 20M): loading it says so and
+    names checkpoint=last; a best.pt of the last frame, or checkpoint=last itself, says nothing."""
+    import shutil
+
+    from ppo_torchrl.checkpoint import load, load_policy, save
+
+    run = tmp_path / "run"
+    shutil.copytree(trained_run, run, ignore=shutil.ignore_patterns("eval", "videos"))
+    last = load(run / "checkpoints" / "last.pt")
+    save(run / "checkpoints" / "best.pt", {**last, "frames": 256, "best_eval_return": 12.5})
+    load_policy(run, "best")
+    err = capsys.readouterr().err
+    assert f"note: best.pt is the policy at 256 of the run's {last['frames']:,} frames (its highest in-training eval " \
+           "return, 12.5); checkpoint=last is the final one" in err
+    load_policy(run, "last")
+    save(run / "checkpoints" / "best.pt", last)
+    load_policy(run, "best")
+    assert "best.pt is the policy at" not in capsys.readouterr().err
+
+
 def test_checkpoint_fallbacks_say_what_was_loaded(trained_run, tmp_path):
     """Issue 49: best without a best.pt is last.pt, labelled (last) in the line, eval.json and the video's
     name; a checkpoint that is not there names those that are."""
