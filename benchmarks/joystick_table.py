@@ -6,6 +6,7 @@ falls by more than `base`'s standard error (std / sqrt(n)), no row's yaw error, 
 worse than `base`'s worst, and no robot's mean v_xy error gets worse.
 
     python benchmarks/joystick_table.py base=<dir> <label>=<dir> ... [--out table.md]
+    python benchmarks/joystick_table.py report=<dir> [--out table.md]   # a report: each goal, the rows meeting it
 
 Each dir holds one row dir per robot and seed, named `<robot>_seed<s>` (its `summary.json`, `eval/tracking.json` or
 `eval/tracking.json.xz`). A row without its tracking set is listed as waiting and takes no part in a decision; a lever
@@ -93,6 +94,34 @@ def decide(lever: dict, base: dict) -> str:
     return f"kept (v_xy {m - bm:+.3f} against a margin of {margin:.3f}, on {len(keys)} rows)"
 
 
+GOALS = (("v_xy", "v_xy <= 0.05", 0.05), ("yaw", "yaw <= 0.05", 0.05), ("falls", "falls <= 1%", 0.01),
+         ("falls_extremes", "worst extreme <= 5%", 0.05), ("stand", "standing joints < 0.05 rad", 0.05))
+
+
+def goals(done: dict) -> str:
+    """A report's reading (no base given): for each of issue 73's goals, the rows that meet it, and which do not."""
+    parts = []
+    for key, text, limit in GOALS:
+        met = [k for k, (f, _) in done.items() if f[key] is not None and
+               (f[key] < limit if key == "stand" else f[key] <= limit + 1e-12)]
+        missed = sorted(k for k in done if k not in met)
+        named = "; missed by " + ", ".join(f"{r} seed {s}" for r, s in missed) if 0 < len(missed) <= 3 else ""
+        parts.append(f"{text} in {len(met)} of {len(done)} rows{named}")
+    return "goals: " + ", ".join(parts)
+
+
+def clock(seconds) -> str:
+    """A wall time as h:mm, or - when the summary has none."""
+    if not isinstance(seconds, (int, float)):
+        return "-"
+    minutes = round(seconds / 60)
+    return f"{minutes // 60}:{minutes % 60:02d}"
+
+
+def fps(value) -> str:
+    return f"{value:,.0f}" if isinstance(value, (int, float)) else "-"
+
+
 def fmt(value, digits: int = 3) -> str:
     return "-" if value is None else f"{value:.{digits}f}"
 
@@ -101,7 +130,8 @@ def table(entries: list) -> str:
     found = {label: rows(path) for label, path in entries}
     base = found.get("base", ({}, []))[0]
     lines = ["| setting | row | frames | v_xy error (sqrt(g l)) | yaw error (sqrt(g / l)) | falls | falls, worst extreme | "
-             "worst command (v_xy) | standing joints (rad rms) |", "|---|---|---|---|---|---|---|---|---|"]
+             "worst command (v_xy) | standing joints (rad rms) | wall (h:mm) | frames/s |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     verdicts = []
     for label, _ in entries:
         done, waiting = found[label]
@@ -109,14 +139,15 @@ def table(entries: list) -> str:
             frames = f"{summary['frames']:,}" if "frames" in summary else "-"
             extreme = "-" if f["falls_extremes"] is None else f"{f['falls_extremes']:.0%}"
             lines.append(f"| {label} | {robot} seed {seed} | {frames} | {fmt(f['v_xy'])} | {fmt(f['yaw'])} | "
-                         f"{f['falls']:.0%} | {extreme} | {f['worst']} | {fmt(f['stand'])} |")
+                         f"{f['falls']:.0%} | {extreme} | {f['worst']} | {fmt(f['stand'])} | "
+                         f"{clock(summary.get('wall_s'))} | {fps(summary.get('sps'))} |")
         for name in waiting:
-            lines.append(f"| {label} | {name} | waiting (no tracking set yet) | | | | | | |")
+            lines.append(f"| {label} | {name} | waiting (no tracking set yet) | | | | | | | | |")
         values = [f["v_xy"] for f, _ in done.values()]
         robots = sorted({k[0] for k in done})
         per_robot = ", ".join(f"{r} {mean_std([done[k][0]['v_xy'] for k in done if k[0] == r])[0]:.3f}" for r in robots)
         mean, std = mean_std(values)
-        decision = "baseline" if label == "base" else decide(done, base)
+        decision = "baseline" if label == "base" else decide(done, base) if "base" in found else goals(done)
         spread = f"{fmt(mean)} +- {fmt(std)} over {len(values)} rows" if len(values) > 1 else (
             f"{fmt(mean)} (one row)" if values else "no row yet")
         verdicts.append(f"- **{label}**: v_xy {spread} ({per_robot}); {decision}")

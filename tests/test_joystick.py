@@ -319,7 +319,17 @@ def test_the_tuning_table_keeps_a_lever_only_by_the_plans_rule(tmp_path):
     assert "rejected" in verdicts["falls"] and "falls beyond base's worst" in verdicts["falls"]
     assert "| better | go1 seed 8 | waiting" in text
     assert "v_xy 0.150 (one row)" in verdicts["single"] and "nan" not in text and "no row yet" in verdicts["waits"]
-    assert "| base | go1 seed 7 | 20,000,000 | 0.220 | 0.040 | 0% | 0% | forward 0.330 | 0.020 |" in text
+    assert "| base | go1 seed 7 | 20,000,000 | 0.220 | 0.040 | 0% | 0% | forward 0.330 | 0.020 | - | - |" in text
+    # a report (no base): each of issue 73's goals with the rows that meet it; the row's wall time and frames/s
+    row("report", "go1_seed16", 0.04)
+    row("report", "a1_seed16", 0.08, falls=0.3)
+    (tmp_path / "report" / "a1_seed16" / "summary.json").write_text(json.dumps(
+        {"frames": 20_000_000, "wall_s": 9750.0, "sps": 2066.7}))
+    report = joystick_table.table([("report", tmp_path / "report")])
+    assert "| report | a1 seed 16 | 20,000,000 | 0.080 | 0.040 | 30% | 30% | forward 0.120 | 0.020 | 2:42 | 2,067 |" \
+        in report
+    assert ("goals: v_xy <= 0.05 in 1 of 2 rows; missed by a1 seed 16, yaw <= 0.05 in 2 of 2 rows, falls <= 1% in 1 "
+            "of 2 rows; missed by a1 seed 16") in report
 
 
 def _qmul(a, b):
