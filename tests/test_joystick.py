@@ -332,6 +332,38 @@ def test_the_tuning_table_keeps_a_lever_only_by_the_plans_rule(tmp_path):
             "of 2 rows; missed by a1 seed 16") in report
 
 
+def test_the_rounds_curves_read_every_row_with_metrics_and_smooth_over_frames(tmp_path):
+    """benchmarks/joystick_curves.py: every <robot>_seed<s> dir with a metrics record (plain or .xz) is a curve, one
+    without is left out; a value is the mean over the last WINDOW frames, so logs thinned to different strides agree."""
+    import lzma
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))
+    import joystick_curves
+
+    header = "frames,train/return_last100,reward/tracking_lin_vel,reward/tracking_ang_vel\n"
+    def log(stride):
+        return header + "".join(f"{f},{f / 1e5},{2 * f / 1e5},\n" for f in range(stride, 2_000_001, stride))
+    (tmp_path / "go1_seed16").mkdir()
+    (tmp_path / "go1_seed16" / "metrics.csv").write_text(log(100_000))
+    (tmp_path / "a1_seed16").mkdir()
+    (tmp_path / "a1_seed16" / "metrics.csv.xz").write_bytes(lzma.compress(log(250_000).encode()))
+    (tmp_path / "spot_seed16").mkdir()  # still waiting: no metrics
+    found = joystick_curves.curves(tmp_path)
+    assert sorted(found) == [("a1", 16), ("go1", 16)]
+    fine, coarse = found[("go1", 16)], found[("a1", 16)]
+    y = joystick_curves.smooth(fine["frames"], fine["train/return_last100"])
+    assert y[-1] == pytest.approx(np.mean([16, 17, 18, 19, 20]))  # 1.6M (exclusive) .. 2.0M
+    assert np.isnan(joystick_curves.smooth(fine["frames"], fine["reward/tracking_ang_vel"])).all()  # an empty column
+    z = joystick_curves.smooth(coarse["frames"], coarse["train/return_last100"])
+    assert z[-1] == pytest.approx(np.mean([17.5, 20]))  # 1.75M, 2.0M: the same window, fewer points
+    out = joystick_curves.plot(tmp_path, tmp_path / "curves.png")
+    from PIL import Image
+
+    assert Image.open(out).mode == "P"
+
+
 def _qmul(a, b):
     w1, x1, y1, z1 = a
     w2, x2, y2, z2 = b
