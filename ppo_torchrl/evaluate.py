@@ -232,6 +232,42 @@ def tracking_eval(cfg, ac, obs_stats, args: dict, out_dir: Path, run_dir: Path, 
     return {"tracking": {name: r["overall"] for name, r in results.items()}}
 
 
+def drive_eval(cfg, ac, obs_stats, driving, seed: int, out_dir: Path, run_dir: Path, label: str) -> dict:
+    """drive= (tasks/locomotion/drive.py): one episode filmed through the command script, drive.mp4, and each
+    segment's command against the velocity measured over it."""
+    from ppo_torchrl.rundir import record
+    from ppo_torchrl.tasks.locomotion.drive import drive
+
+    segments = drive(make_batch, cfg, ac, obs_stats, driving, out_dir / "drive.mp4", episode_seeds(seed, 1)[0],
+                     owner=run_dir)
+    record(run_dir, [out_dir / "drive.mp4"])
+    for segment in segments:
+        print(f"{segment['segment']}: command {segment['command']}, measured "
+              f"{[round(x, 3) for x in segment['measured']]}" + (" (fell)" if segment["fell"] else ""))
+    print(f"{label}: {out_dir / 'drive.mp4'}")
+    return {"drive": segments}
+
+
+def heights_eval(cfg, ac, obs_stats, heights, args: dict, out_dir: Path, run_dir: Path, label: str, writes) -> dict:
+    """heights= (tasks/locomotion/sweep.py): the step task's episodes at each step height; its sweep files."""
+    from ppo_torchrl.rundir import record
+    from ppo_torchrl.tasks.locomotion import sweep
+
+    if cfg.env.get("legged") is not None and any(h > 0 for h, _ in heights) and \
+            not any(legs or h >= 1 for h, legs in heights):  # every value below 1 m: 0.25 meant 0.25l?
+        top = max(h for h, _ in heights)
+        print(f"note: heights={args['heights']} are in m (the highest a {top * 100:g} cm step); in this robot's "
+              f"leg lengths write an l: heights={','.join(f'{h:g}l' if h else '0' for h, _ in heights)}",
+              file=sys.stderr, flush=True)
+    heights = sweep.heights_in_metres(heights, cfg.env)
+    rows = sweep.height_sweep(cfg, ac, obs_stats, heights, args["episodes"], args["seed"], out_dir,
+                              f"{run_dir.resolve().name}\n{label}", owner=run_dir, evaluate=evaluate_policy)
+    print(f"{label}: height sweep over {args['episodes']} episodes per height: "
+          f"{out_dir / sweep.SWEEP_FILES[0]}, {out_dir / sweep.SWEEP_FILES[1]}")
+    record(run_dir, writes)  # in the run dir that holds them, however out= spells it
+    return {"heights": rows}
+
+
 @releasing  # the shared locks it takes (locks.read) go when it ends
 def main(argv: list[str]) -> dict:
     from ppo_torchrl.checkpoint import check_same_env, check_spec, load_policy, resolve_checkpoint
@@ -310,30 +346,9 @@ def main(argv: list[str]) -> dict:
     if args["tracking"]:
         return tracking_eval(cfg, ac, obs_stats, args, out_dir, run_dir, label)
     if args["drive"]:
-        from ppo_torchrl.tasks.locomotion.drive import drive
-
-        segments = drive(make_batch, cfg, ac, obs_stats, driving, out_dir / "drive.mp4", episode_seeds(args["seed"], 1)[0],
-                         owner=run_dir)
-        record(run_dir, [out_dir / "drive.mp4"])
-        for segment in segments:
-            print(f"{segment['segment']}: command {segment['command']}, measured "
-                  f"{[round(x, 3) for x in segment['measured']]}" + (" (fell)" if segment["fell"] else ""))
-        print(f"{label}: {out_dir / 'drive.mp4'}")
-        return {"drive": segments}
+        return drive_eval(cfg, ac, obs_stats, driving, args["seed"], out_dir, run_dir, label)
     if heights:
-        if cfg.env.get("legged") is not None and any(h > 0 for h, _ in heights) and \
-                not any(legs or h >= 1 for h, legs in heights):  # every value below 1 m: 0.25 meant 0.25l?
-            top = max(h for h, _ in heights)
-            print(f"note: heights={args['heights']} are in m (the highest a {top * 100:g} cm step); in this robot's "
-                  f"leg lengths write an l: heights={','.join(f'{h:g}l' if h else '0' for h, _ in heights)}",
-                  file=sys.stderr, flush=True)
-        heights = sweep.heights_in_metres(heights, cfg.env)
-        rows = sweep.height_sweep(cfg, ac, obs_stats, heights, args["episodes"], args["seed"], out_dir,
-                                  f"{run_dir.resolve().name}\n{label}", owner=run_dir, evaluate=evaluate_policy)
-        print(f"{label}: height sweep over {args['episodes']} episodes per height: "
-              f"{out_dir / sweep.SWEEP_FILES[0]}, {out_dir / sweep.SWEEP_FILES[1]}")
-        record(run_dir, writes)  # in the run dir that holds them, however out= spells it
-        return {"heights": rows}
+        return heights_eval(cfg, ac, obs_stats, heights, args, out_dir, run_dir, label, writes)
     if args["video"]:
         intend(run_dir, [video])  # imageio writes the mp4 in place: listed first, a cut one is the app's
     result = evaluate_policy(cfg, ac, obs_stats, args["episodes"], seed=args["seed"],
