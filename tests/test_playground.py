@@ -361,6 +361,39 @@ def test_tracking_finds_the_command_and_the_trunks_motion_where_its_layout_says(
     assert np.corrcoef(turned.ravel(), (np.diff(g, axis=0) / 0.02).ravel())[0, 1] > 0.95
 
 
+@pytest.mark.parametrize("task", ["Go1JoystickFlatTerrain-v1", "Go1JoystickRoughTerrain-v1",
+                                  "SpotFlatTerrainJoystick-v1"])
+def test_the_layouts_velocities_are_the_ones_the_tasks_own_tracking_rewards_read(task):
+    """Each LAYOUTS entry against the task itself: with its command segment, its privileged local velocity and its
+    gyro's yaw rate, the task's own tracking terms come back (info: scale * exp(-error^2 / sigma), the task's config);
+    and its joint angles are the noise-free ones of the actor's state (Go1's at 9-21, Spot's at 6-18)."""
+    from ppo_torchrl.tasks.playground_tracking import LAYOUTS
+
+    layout, joints = LAYOUTS[task], 9 if task.startswith("Go1") else 6
+    config = envpool.make_spec(task).config
+    env = envpool.make(task, env_type="gymnasium", num_envs=1, num_threads=1, seed=5, noise_level=0.0)
+    env.reset()
+    rng = np.random.default_rng(1)
+    steps = 0
+    for _ in range(100):
+        obs, _, terminated, truncated, info = env.step(rng.uniform(-0.5, 0.5, (1, 12)))
+        if terminated[0] or truncated[0]:
+            break
+        s, p = obs["state"][0], obs["privileged_state"][0]
+        command = s[layout.command:layout.command + 3]
+        assert np.allclose(command, info["command"][0])
+        lin = np.square(command[:2] - p[layout.linvel:layout.linvel + 2]).sum()
+        yaw = np.square(command[2] - p[layout.gyro + 2])
+        assert info["reward_tracking_lin_vel"][0] == pytest.approx(
+            config.tracking_lin_vel_scale * np.exp(-lin / config.tracking_sigma), rel=1e-4, abs=1e-7)
+        assert info["reward_tracking_ang_vel"][0] == pytest.approx(
+            config.tracking_ang_vel_scale * np.exp(-yaw / config.tracking_sigma), rel=1e-4, abs=1e-7)
+        assert np.allclose(p[layout.joints:layout.joints + 12], s[joints:joints + 12])
+        steps += 1
+    env.close()
+    assert steps > 50
+
+
 def test_tracking_refuses_a_task_it_has_no_layout_for():
     from ppo_torchrl.tasks.playground_tracking import layout_of
 

@@ -11,12 +11,13 @@ physics; so, as a robot's joystick does, the evaluation writes each command of t
 observation the policy sees, and measures the trunk from the task's privileged state: the local linear velocity (the
 trunk's velocimeter) and the gyro's yaw rate, as Playground's tracking rewards read them, and the joint angles for
 the standing command's motion. Units: sqrt(g l) and sqrt(g / l), l the leg length that robots/model.py reads from the
-task's own MJCF (Go1: 0.426 m, as Menagerie's Go1). The figures differ from env=legged's in two ways, said: the
+task's own MJCF (Go1: 0.426 m, as Menagerie's Go1; Spot: 0.657 m). The figures differ from env=legged's in two ways, said: the
 velocity is the trunk frame's (env=legged's: the ground velocity in the heading frame; the same on level ground up to
 the trunk's tilt), and no gait figures (EnvPool gives no contacts of the feet to read here).
 
 LAYOUTS: where those are in each task's vectors, found from the tasks' observations and checked by
-tests/test_playground.py against info["command"], the noise-free state and the gravity vector's motion. A task
+tests/test_playground.py against info["command"], the noise-free state, the gravity vector's motion and the task's own
+tracking reward terms (info), computed back from the velocities found. A task
 without an entry: tracking=true names the tasks that have one.
 """
 
@@ -43,7 +44,11 @@ class Layout:
 
 _GO1 = Layout("mujoco/playground/assets/mujoco_playground/_src/locomotion/go1/xmls/scene_mjx_feetonly_flat_terrain.xml",
               command=45, linvel=57, gyro=48, joints=63)
-LAYOUTS = {"Go1JoystickFlatTerrain-v1": _GO1, "Go1JoystickRoughTerrain-v1": _GO1}
+# Spot's state: gyro 0-3, gravity 3-6, joint angles 6-18, their error history 18-54, feet 54-66, last action 66-78, the
+# command 78-81; its privileged_state: that state (81), then gyro, accelerometer, gravity, local linear velocity, ...
+_SPOT = Layout("mujoco/playground/assets/mujoco_playground/_src/locomotion/spot/xmls/scene_mjx_feetonly_flat_terrain.xml",
+               command=78, linvel=90, gyro=81, joints=96)
+LAYOUTS = {"Go1JoystickFlatTerrain-v1": _GO1, "Go1JoystickRoughTerrain-v1": _GO1, "SpotFlatTerrainJoystick-v1": _SPOT}
 
 
 def layout_of(env_cfg) -> Layout:
