@@ -70,12 +70,14 @@ def plot(report: Path, out: Path) -> Path:
     for ax, (column, label) in zip(axes, PANELS):
         for (robot, seed), m in sorted(found.items()):
             if column in m:
-                ax.plot(m["frames"], smooth(m["frames"], m[column]), color=colours[robot], linestyle=STYLES[seeds.index(seed) % len(STYLES)],
+                style = STYLES[seeds.index(seed) % len(STYLES)]
+                ax.plot(m["frames"], smooth(m["frames"], m[column]), color=colours[robot], linestyle=style,
                         linewidth=1.2, label=f"{robot} seed {seed}")
         ax.set(xlabel="frames", title=label)
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=7, loc="best")
-    fig.suptitle(f"{report.name}: training curves of {len(found)} rows (each point the mean over the last {WINDOW:,} frames)")
+    fig.suptitle(f"{report.name}: training curves of {len(found)} rows "
+                 f"(each point the mean over the last {WINDOW:,} frames)")
     write_png(fig, out, 80)
     plt.close(fig)
     return out

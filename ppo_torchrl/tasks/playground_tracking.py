@@ -11,14 +11,14 @@ physics; so, as a robot's joystick does, the evaluation writes each command of t
 observation the policy sees, and measures the trunk from the task's privileged state: the local linear velocity (the
 trunk's velocimeter) and the gyro's yaw rate, as Playground's tracking rewards read them, and the joint angles for
 the standing command's motion. Units: sqrt(g l) and sqrt(g / l), l the leg length that robots/model.py reads from the
-task's own MJCF (Go1: 0.426 m, as Menagerie's Go1; Spot: 0.657 m). The figures differ from env=legged's in two ways, said: the
-velocity is the trunk frame's (env=legged's: the ground velocity in the heading frame; the same on level ground up to
-the trunk's tilt), and no gait figures (EnvPool gives no contacts of the feet to read here).
+task's own MJCF (Go1: 0.426 m, as Menagerie's Go1; Spot: 0.657 m). The figures differ from env=legged's in two ways,
+said: the velocity is the trunk frame's (env=legged's: the ground velocity in the heading frame; the same on level
+ground up to the trunk's tilt), and no gait figures (EnvPool gives no contacts of the feet to read here).
 
 LAYOUTS: where those are in each task's vectors, found from the tasks' observations and checked by
 tests/test_playground.py against info["command"], the noise-free state, the gravity vector's motion and the task's own
-tracking reward terms (info), computed back from the velocities found. A task
-without an entry: tracking=true names the tasks that have one.
+tracking reward terms (info), computed back from the velocities found. A task without an entry: tracking=true names
+the tasks that have one.
 """
 
 from __future__ import annotations
