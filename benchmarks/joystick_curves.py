@@ -2,15 +2,18 @@
 episodes) and the two tracking terms' per-episode sums against frames, robots by colour, seeds by line style, each a
 running mean over the last 500,000 frames (logs thinned to different strides read alike).
 
-    python benchmarks/joystick_curves.py <dir of row dirs> [--out <dir>/curves.png]
+    python benchmarks/joystick_curves.py <dir of row dirs> [--out <dir>/curves.png] [--running]
 
 It reads each `<robot>_seed<s>/metrics.csv` (or the record's `metrics.csv.xz`) as `python -m ppo_torchrl.report` does
 and stands for the round in place of one `report.png` per row (the tree's room, results/README.md); a row's own
-report is still `python -m ppo_torchrl.report <row dir>` on its record.
+report is still `python -m ppo_torchrl.report <row dir>` on its record. A row whose summary.json does not yet say
+`finished` (training, or interrupted before its last frame) is left out, so the figure drawn beside a round's records
+shows only rows those records hold; `--running` draws those too, marked "(running)", to watch a round train.
 """
 
 from __future__ import annotations
 
+import json
 import sys
 from pathlib import Path
 
@@ -39,14 +42,25 @@ def smooth(frames, values, window: int = WINDOW):
     return np.where(n > 0, (total[1:] - total[start]) / np.maximum(n, 1), np.nan)
 
 
-def curves(report: Path) -> dict:
-    """{(robot, seed): metrics columns} of every row dir with metrics."""
+def finished(row: Path) -> bool:
+    """The row's training is done: its summary.json says so (a crafted row without one counts as done)."""
+    summary = row / "summary.json"
+    if not summary.is_file():
+        return True
+    try:
+        return json.loads(summary.read_text()).get("status") == "finished"
+    except (OSError, ValueError):
+        return False
+
+
+def curves(report: Path, running: bool = False) -> dict:
+    """{(robot, seed): metrics columns} of every row dir with metrics; with running=False only finished rows."""
     from ppo_torchrl.records import has_record
     from ppo_torchrl.report import read_metrics
 
     found = {}
     for row in sorted(p for p in report.iterdir() if p.is_dir() and ROW.match(p.name)):
-        if has_record(row / "metrics.csv"):
+        if has_record(row / "metrics.csv") and (running or finished(row)):
             m = ROW.match(row.name)
             found[(m["robot"], int(m["seed"]))] = read_metrics(row / "metrics.csv", required=("frames",))
     if not found:
@@ -54,7 +68,7 @@ def curves(report: Path) -> dict:
     return found
 
 
-def plot(report: Path, out: Path) -> Path:
+def plot(report: Path, out: Path, running: bool = False) -> Path:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -62,7 +76,7 @@ def plot(report: Path, out: Path) -> Path:
 
     from ppo_torchrl.report import write_png
 
-    found = curves(report)
+    found = curves(report, running)
     robots = sorted({r for r, _ in found})
     seeds = sorted({s for _, s in found})
     colours = {r: f"C{i}" for i, r in enumerate(robots)}
@@ -72,7 +86,8 @@ def plot(report: Path, out: Path) -> Path:
             if column in m:
                 style = STYLES[seeds.index(seed) % len(STYLES)]
                 ax.plot(m["frames"], smooth(m["frames"], m[column]), color=colours[robot], linestyle=style,
-                        linewidth=1.2, label=f"{robot} seed {seed}")
+                        linewidth=1.2, label=f"{robot} seed {seed}"
+                        + ("" if finished(report / f"{robot}_seed{seed}") else " (running)"))
         ax.set(xlabel="frames", title=label)
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=7, loc="best")
@@ -87,10 +102,11 @@ def main(argv=None) -> int:
     parser = Parser(description=__doc__.splitlines()[0])
     parser.add_argument("report", type=Path)
     parser.add_argument("--out", type=out_file, default=None)
+    parser.add_argument("--running", action="store_true", help="also draw rows still training")
     args = parser.parse_args(argv)
     if not args.report.is_dir():
         raise ConfigError(f"{args.report}: no such directory")
-    out = plot(args.report, args.out or args.report / "curves.png")
+    out = plot(args.report, args.out or args.report / "curves.png", args.running)
     print(f"wrote {out}")
     return 0
 

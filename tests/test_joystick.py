@@ -334,7 +334,8 @@ def test_the_tuning_table_keeps_a_lever_only_by_the_plans_rule(tmp_path):
 
 def test_the_rounds_curves_read_every_row_with_metrics_and_smooth_over_frames(tmp_path):
     """benchmarks/joystick_curves.py: every <robot>_seed<s> dir with a metrics record (plain or .xz) is a curve, one
-    without is left out; a value is the mean over the last WINDOW frames, so logs thinned to different strides agree."""
+    without is left out, and so is one still training (unless running=True); a value is the mean over the last
+    WINDOW frames, so logs thinned to different strides agree."""
     import lzma
     import sys
     from pathlib import Path
@@ -350,8 +351,13 @@ def test_the_rounds_curves_read_every_row_with_metrics_and_smooth_over_frames(tm
     (tmp_path / "a1_seed16").mkdir()
     (tmp_path / "a1_seed16" / "metrics.csv.xz").write_bytes(lzma.compress(log(250_000).encode()))
     (tmp_path / "spot_seed16").mkdir()  # still waiting: no metrics
+    (tmp_path / "go2_seed16").mkdir()  # still training: left out unless running=True
+    (tmp_path / "go2_seed16" / "metrics.csv").write_text(log(100_000))
+    (tmp_path / "go2_seed16" / "summary.json").write_text('{"status": "running"}')
+    (tmp_path / "a1_seed16" / "summary.json").write_text('{"status": "finished"}')
     found = joystick_curves.curves(tmp_path)
     assert sorted(found) == [("a1", 16), ("go1", 16)]
+    assert sorted(joystick_curves.curves(tmp_path, running=True)) == [("a1", 16), ("go1", 16), ("go2", 16)]
     fine, coarse = found[("go1", 16)], found[("a1", 16)]
     y = joystick_curves.smooth(fine["frames"], fine["train/return_last100"])
     assert y[-1] == pytest.approx(np.mean([16, 17, 18, 19, 20]))  # 1.6M (exclusive) .. 2.0M
