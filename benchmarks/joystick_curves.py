@@ -13,7 +13,6 @@ shows only rows those records hold; `--running` draws those too, marked "(runnin
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
@@ -44,13 +43,9 @@ def smooth(frames, values, window: int = WINDOW):
 
 def finished(row: Path) -> bool:
     """The row's training is done: its summary.json says so (a crafted row without one counts as done)."""
-    summary = row / "summary.json"
-    if not summary.is_file():
-        return True
-    try:
-        return json.loads(summary.read_text()).get("status") == "finished"
-    except (OSError, ValueError):
-        return False
+    from ppo_torchrl.lifecycle import unfinished
+
+    return not (row / "summary.json").is_file() or not unfinished(row)
 
 
 def curves(report: Path, running: bool = False) -> dict:

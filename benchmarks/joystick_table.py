@@ -29,13 +29,17 @@ from levers_table import mean_std
 ROW = re.compile(r"^(?P<robot>.+)_seed(?P<seed>\d+)$")
 
 
-def tracking(row: Path):
-    for name, opener in (("tracking.json", open), ("tracking.json.xz", lzma.open)):
-        path = row / "eval" / name
-        if path.is_file():
-            with opener(path, "rt") as f:
+def read_json(path: Path):
+    """The JSON at path, or at path + .xz as records keep it; None when neither is there."""
+    for candidate, opener in ((path, open), (path.with_name(path.name + ".xz"), lzma.open)):
+        if candidate.is_file():
+            with opener(candidate, "rt") as f:
                 return json.load(f)
     return None
+
+
+def tracking(row: Path):
+    return read_json(row / "eval" / "tracking.json")
 
 
 def figures(result: dict) -> dict:

@@ -13,14 +13,13 @@ waiting and counts in no mean.
 
 from __future__ import annotations
 
-import json
-import lzma
 import re
 import sys
 from pathlib import Path
 
 from cli_args import ConfigError, Parser, out_file
 from cli_args import run as run_main
+from joystick_table import clock, read_json
 from levers_table import mean_std
 
 ROW = re.compile(r"^(?P<task>.+)_seed(?P<seed>\d+)$")
@@ -32,14 +31,6 @@ PUBLISHED = {"Go1JoystickFlatTerrain-v1": "200M steps, 8,192 envs, one A100",
              "BarkourJoystick-v1": "100M steps, 8,192 envs, one A100"}
 TRACKING_GOAL, FALLS_GOAL = 0.05, 0.01  # issue 73's tracking goals (its units), its falls goal
 FRAMES_GOAL = 20_000_000 * 1.001  # issue 74's budget; a run of total_frames=20000000 ends on its batch, 20,000,768
-
-
-def read_json(path: Path):
-    for candidate, opener in ((path, open), (path.with_name(path.name + ".xz"), lzma.open)):
-        if candidate.is_file():
-            with opener(candidate, "rt") as f:
-                return json.load(f)
-    return None
 
 
 def nominal(tracking) -> dict:
@@ -62,17 +53,6 @@ def rows(report: Path) -> tuple:
             "at20": nominal(read_json(row / "eval_20M" / "tracking.json")), "frames": summary.get("frames"),
             "wall_s": summary.get("wall_s"), "sps": summary.get("sps")}
     return done, waiting
-
-
-def fmt(value, digits: int = 3) -> str:
-    return "-" if value is None else f"{value:.{digits}f}"
-
-
-def clock(seconds) -> str:
-    if not isinstance(seconds, (int, float)):
-        return "-"
-    minutes = round(seconds / 60)
-    return f"{minutes // 60}:{minutes % 60:02d}"
 
 
 def best_stride(track) -> str:
