@@ -34,7 +34,7 @@ from ppo_torchrl.filming import VIDEO_SIZE, EpisodeProgress, Filming, video_line
 from ppo_torchrl.env_state import env_state_of
 from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.locks import read, releasing
-from ppo_torchrl.tasks import figures_module
+from ppo_torchrl.tasks import figures_kind, figures_module
 from ppo_torchrl.models import ActorCritic, deterministic_policy
 
 def evaluate_policy(cfg, ac: ActorCritic, obs_stats: Optional[dict], episodes: int, seed: int,
@@ -124,7 +124,7 @@ def run_episodes(cfg, ac: ActorCritic, obs_stats: Optional[dict], seeds: Sequenc
             "heights": [], "dt": gym_env.unwrapped.dt if sim is not None else None, "success_margin": None,
             "video": video, "terminated": terminated, "ends": [None] * len(seeds), "seeds": list(seeds), "feet": None,
             "metrics": metrics,  # a MuJoCo base's forward velocity; a Playground task's reward terms
-            "figures": "locomotion" if sim is not None else "playground" if cfg.env.get("playground") is not None else None}
+            "figures": figures_kind(cfg.env, sim is not None)}
 
 
 def summarize(cfg, episodes: dict) -> dict:
@@ -201,42 +201,33 @@ TRACKING_FILES = ("tracking.json", "tracking.md", "tracking.png")
 
 
 def tracking_eval(cfg, ac, obs_stats, args: dict, out_dir: Path, run_dir: Path, label: str) -> dict:
-    """tracking=true (tasks/locomotion/tracking.py): the fixed command set, in the nominal world and, with
-    extremes=true, at each corner of the run's randomization; tracking.json, tracking.md, tracking.png."""
-    from ppo_torchrl.envs import gym_make_kwargs
+    """tracking=true (tasks/joystick.py): the fixed command set, in the nominal world and, with extremes=true, at
+    each corner of the run's randomization; tracking.json, tracking.md, tracking.png."""
     from ppo_torchrl.rundir import atomic_write_bytes, atomic_write_json, record
-    from ppo_torchrl.tasks.locomotion import tracking
+    from ppo_torchrl.tasks import joystick
 
-    worlds = [("nominal", None)]
-    if args["extremes"]:
-        worlds += tracking.extremes(gym_make_kwargs(cfg.env)["legged"]["randomize"])
     results = {}
-    for name, draw in worlds:
-        if cfg.env.get("playground") is not None:  # a Playground joystick task (tasks/playground_tracking.py)
-            from ppo_torchrl.tasks import playground_tracking
-
-            results[name] = playground_tracking.track(cfg, ac, obs_stats, args["episodes"], args["seed"])
-        else:
-            results[name] = tracking.track(make_batch, cfg, ac, obs_stats, args["episodes"], args["seed"], draw)
+    for name, draw in joystick.worlds(cfg.env, args["extremes"]):
+        results[name] = joystick.track(cfg, ac, obs_stats, args["episodes"], args["seed"], draw)
         o = results[name]["overall"]
         print(f"{label}, {name}: v_xy error {o['v_xy_error']:.3f} sqrt(g l), yaw rate error {o['yaw_rate_error']:.3f} "
               f"sqrt(g / l), falls {o['falls']:.0%} of {o['episodes']} episodes", flush=True)
     out_dir.mkdir(parents=True, exist_ok=True)
-    text = "".join(f"## {name}\n\n{tracking.table(r)}\n" for name, r in results.items())
+    text = "".join(f"## {name}\n\n{joystick.table(r)}\n" for name, r in results.items())
     atomic_write_json(out_dir / TRACKING_FILES[0], {"title": label, "seed": args["seed"], "worlds": results},
                       owner=run_dir)
     atomic_write_bytes(out_dir / TRACKING_FILES[1], lambda f: f.write(f"# {label}\n\n{text}".encode()), run_dir)
-    tracking.plot(results["nominal"], out_dir / TRACKING_FILES[2], label, run_dir)
+    joystick.plot(results["nominal"], out_dir / TRACKING_FILES[2], label, run_dir)
     record(run_dir, [out_dir / n for n in TRACKING_FILES])
-    print(tracking.table(results["nominal"]) + f"tracking: {out_dir / TRACKING_FILES[0]}, {out_dir / TRACKING_FILES[2]}")
+    print(joystick.table(results["nominal"]) + f"tracking: {out_dir / TRACKING_FILES[0]}, {out_dir / TRACKING_FILES[2]}")
     return {"tracking": {name: r["overall"] for name, r in results.items()}}
 
 
 def drive_eval(cfg, ac, obs_stats, driving, seed: int, out_dir: Path, run_dir: Path, label: str) -> dict:
-    """drive= (tasks/locomotion/drive.py): one episode filmed through the command script, drive.mp4, and each
+    """drive= (tasks/joystick.py): one episode filmed through the command script, drive.mp4, and each
     segment's command against the velocity measured over it."""
     from ppo_torchrl.rundir import record
-    from ppo_torchrl.tasks.locomotion.drive import drive
+    from ppo_torchrl.tasks.joystick import drive
 
     segments = drive(make_batch, cfg, ac, obs_stats, driving, out_dir / "drive.mp4", episode_seeds(seed, 1)[0],
                      owner=run_dir)
@@ -253,13 +244,7 @@ def heights_eval(cfg, ac, obs_stats, heights, args: dict, out_dir: Path, run_dir
     from ppo_torchrl.rundir import record
     from ppo_torchrl.tasks.locomotion import sweep
 
-    if cfg.env.get("legged") is not None and any(h > 0 for h, _ in heights) and \
-            not any(legs or h >= 1 for h, legs in heights):  # every value below 1 m: 0.25 meant 0.25l?
-        top = max(h for h, _ in heights)
-        print(f"note: heights={args['heights']} are in m (the highest a {top * 100:g} cm step); in this robot's "
-              f"leg lengths write an l: heights={','.join(f'{h:g}l' if h else '0' for h, _ in heights)}",
-              file=sys.stderr, flush=True)
-    heights = sweep.heights_in_metres(heights, cfg.env)
+    heights = sweep.heights_in_metres(heights, cfg.env, args["heights"])  # a unit note on stderr where due
     rows = sweep.height_sweep(cfg, ac, obs_stats, heights, args["episodes"], args["seed"], out_dir,
                               f"{run_dir.resolve().name}\n{label}", owner=run_dir, evaluate=evaluate_policy)
     print(f"{label}: height sweep over {args['episodes']} episodes per height: "
@@ -291,9 +276,9 @@ def main(argv: list[str]) -> dict:
     video_episodes, video_length = parse_video_choices(args["video_episodes"], args["video_length"], args["episodes"])
     driving = None
     if args["drive"]:
-        from ppo_torchrl.tasks.locomotion.drive import parse
+        from ppo_torchrl.tasks.joystick import parse_drive
 
-        driving = parse(args["drive"])
+        driving = parse_drive(args["drive"])
         if args["tracking"] or heights or args["video"]:
             raise ConfigError("drive= films its own episode: leave out tracking=, heights= and video=")
     if args["extremes"] and not args["tracking"]:
@@ -330,19 +315,10 @@ def main(argv: list[str]) -> dict:
         check_spec(state, env_spec(cfg.env), cfg.env.id)
     obs_stats = state["normalization"]["obs"]
     label = f"{env_label(cfg.env)} @ {state['frames']} frames ({which})"
-    joystick = batched(cfg.env) and ((cfg.env.get("legged") or {}).get("command") or {}).get("kind") == "velocity"
-    if args["tracking"] and cfg.env.get("playground") is not None:  # before any env is built
-        from ppo_torchrl.tasks.playground_tracking import layout_of
+    if args["tracking"] or args["drive"]:  # before any env is built
+        from ppo_torchrl.tasks import joystick
 
-        layout_of(cfg.env)  # a task whose command and velocities it can find, or one line
-        if args["extremes"]:
-            raise ConfigError("extremes=true fixes the corners of env=legged's randomization; EnvPool's Playground "
-                              "tasks randomize nothing the app can fix: leave it out")
-        joystick = True
-    if (args["tracking"] or args["drive"]) and not joystick:
-        raise ConfigError(f"{'tracking=true' if args['tracking'] else 'drive='} measures a joystick run "
-                          f"(experiment=legged_joystick: env.legged.command.kind=velocity; tracking=true also a "
-                          f"Playground joystick task, env=playground); {run_dir} is not one")
+        joystick.check(cfg.env, args["tracking"], bool(args["drive"]), args["extremes"], run_dir)
     if args["tracking"]:
         return tracking_eval(cfg, ac, obs_stats, args, out_dir, run_dir, label)
     if args["drive"]:

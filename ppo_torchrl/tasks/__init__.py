@@ -14,3 +14,9 @@ def figures_module(kind):
     import importlib
 
     return importlib.import_module(FIGURES[kind]) if kind in FIGURES else None
+
+
+def figures_kind(env_cfg, mujoco: bool):
+    """The kind of an evaluation record on the Gym path: a MuJoCo body's ('locomotion': its forward velocity), a
+    Playground task's ('playground': its reward terms), or None (returns and lengths only)."""
+    return "locomotion" if mujoco else "playground" if env_cfg.get("playground") is not None else None

@@ -6,6 +6,7 @@ figures per foot) and one per episode, with the success-rate curve.
 from __future__ import annotations
 
 import math
+import sys
 from pathlib import Path
 from typing import Optional
 
@@ -35,9 +36,15 @@ def parse_heights(text: str) -> list[tuple]:
     return heights
 
 
-def heights_in_metres(heights: list[tuple], env_cfg) -> list[float]:
-    """parse_heights' values in m: a height in leg lengths times the robot's (read from its model)."""
+def heights_in_metres(heights: list[tuple], env_cfg, text: str = "") -> list[float]:
+    """parse_heights' values in m: a height in leg lengths times the robot's (read from its model). A robot's
+    heights all in m and below 1 m (0.25 meant 0.25l?) get a note on stderr that says how to write leg lengths."""
     if not any(legs for _, legs in heights):
+        if env_cfg.get("legged") is not None and any(h > 0 for h, _ in heights) and not any(h >= 1 for h, _ in heights):
+            top = max(h for h, _ in heights)
+            print(f"note: heights={text} are in m (the highest a {top * 100:g} cm step); in this robot's leg lengths "
+                  f"write an l: heights={','.join(f'{h:g}l' if h else '0' for h, _ in heights)}",
+                  file=sys.stderr, flush=True)
         return [h for h, _ in heights]
     if env_cfg.get("legged") is None:
         raise ConfigError("heights in leg lengths (0.25l) need a run of env=legged, whose robot has one; give m here")
