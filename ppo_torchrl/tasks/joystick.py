@@ -26,7 +26,7 @@ def kind(env_cfg) -> Optional[str]:
     return "legged" if batched(env_cfg) and command.get("kind") == "velocity" else None
 
 
-def check(env_cfg, tracking: bool, drive: bool, extremes: bool, run_dir) -> None:
+def check(env_cfg, tracking: bool, driving: bool, extremes: bool, run_dir) -> None:
     """One ConfigError line where the run's task cannot give what tracking=, drive= or extremes= ask."""
     found = kind(env_cfg)
     if tracking and found == "playground":
@@ -36,7 +36,7 @@ def check(env_cfg, tracking: bool, drive: bool, extremes: bool, run_dir) -> None
         if extremes:
             raise ConfigError("extremes=true fixes the corners of env=legged's randomization; EnvPool's Playground "
                               "tasks randomize nothing the app can fix: leave it out")
-    if (tracking and found is None) or (drive and found != "legged"):
+    if (tracking and found is None) or (driving and found != "legged"):
         raise ConfigError(f"{'tracking=true' if tracking else 'drive='} measures a joystick run "
                           f"(experiment=legged_joystick: env.legged.command.kind=velocity; tracking=true also a "
                           f"Playground joystick task, env=playground); {run_dir} is not one")
