@@ -15,7 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ppo_torchrl import records, report
+from ppo_torchrl import report
+
+from ppo_torchrl import records
 
 
 def copy_finished_runs(sweep: Path, dest: Path, name_of) -> dict:

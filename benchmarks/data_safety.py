@@ -27,7 +27,7 @@ Round 6 (issue 76, item 3): `records` (run-dir steps: on the run's config.yaml),
 data_safety_round6.py says how.
 
 Two modes, one property:
-- run-dir steps (default): each command is a fresh process that makes the entry points' `ppo_torchrl.rundir`
+- run-dir steps (default): each command is a fresh process that makes the entry points' `ppo_torchrl.run.rundir`
   calls in their order (claims, Hydra's start-up files, commits, atomic checkpoints and summaries, listings,
   readers' shared locks, outputs written through `owner=`, the one error path of errors.py), with pauses where
   the kills land; milliseconds a step.
@@ -63,7 +63,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from ppo_torchrl import rundir  # noqa: E402  (the manifest's reading: which eval.json is the app's)
+from ppo_torchrl.run import rundir  # noqa: E402  (the manifest's reading: which eval.json is the app's)
 sys.path.insert(0, str(ROOT / "benchmarks"))
 from data_safety_round6 import API_KINDS, API_NESTED, api_argv, crafted_case  # noqa: E402
 
@@ -113,12 +113,12 @@ def finished(argv, timeout=300) -> tuple:
 COMMAND = r'''
 import sys, time, json, hashlib
 from pathlib import Path
-from ppo_torchrl import rundir
-from ppo_torchrl.lifecycle import Lifecycle
+from ppo_torchrl.run import rundir
+from ppo_torchrl.run.lifecycle import Lifecycle
 from ppo_torchrl.errors import ConfigError, guarded, report_and_exit
-from ppo_torchrl.locks import read
-from ppo_torchrl.ownership import holder
-from ppo_torchrl.signals import ignore_from_now
+from ppo_torchrl.run.locks import read
+from ppo_torchrl.run.ownership import holder
+from ppo_torchrl.run.signals import ignore_from_now
 kind, d, pause = sys.argv[1], Path(sys.argv[2]), float(sys.argv[3])
 out_dir = Path(sys.argv[4]) if len(sys.argv) > 4 else d / "eval"  # evaluate's out=
 life = Lifecycle()  # the command's claims, as __main__.cli holds them
@@ -185,7 +185,7 @@ try:
     elif kind in ("evaluate", "export", "report"):
         if not d.is_dir():
             raise ConfigError(f"run={d}: no such run dir")
-        read(d)  # the readers' shared lock (locks.py): no overwrite starts there while it reads
+        read(d)  # the readers' shared lock (run/locks.py): no overwrite starts there while it reads
         if not (d / "checkpoints" / "last.pt").is_file():  # as checkpoint.resolve_checkpoint (report: metrics.csv)
             raise ConfigError(f"run={d} is not a ppo_torchrl run dir (no checkpoint)")
         out = {"evaluate": out_dir / "eval.json", "export": d / "policy.pt", "report": d / "report.png"}[kind]
@@ -210,7 +210,7 @@ ignore_from_now()
 # answers, or kills it there).
 HOOK = r'''
 import os, sys, tempfile
-from ppo_torchrl.lifecycle import Lifecycle
+from ppo_torchrl.run.lifecycle import Lifecycle
 _at = [0, 0]  # claims under way, steps so far
 def _hooked(call, claim=False):  # claim: counts the claims under way; else a step before and after, in one
     def step():

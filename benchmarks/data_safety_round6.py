@@ -18,7 +18,7 @@ import sys
 import numpy as np
 import ppo_torchrl
 from ppo_torchrl.errors import guarded
-from ppo_torchrl.signals import ignore_from_now
+from ppo_torchrl.run.signals import ignore_from_now
 kind, d, overrides = sys.argv[1], sys.argv[2], sys.argv[3:]
 def call():
     if kind in ("api_train", "api_overwrite"):
@@ -62,7 +62,7 @@ def craft(source: Path, copy: Path, payload: str, victim: Path) -> None:
     """`copy`: the run dir `source` copied, its checkpoints carrying `payload` aimed at the user's file `victim`."""
     import torch
 
-    from ppo_torchrl import checkpoint
+    from ppo_torchrl.run import checkpoint
 
     shutil.copytree(source, copy, symlinks=True)
     extra = {"unlink": [{"_target_": "pathlib.Path.unlink", "self": str(victim)}],

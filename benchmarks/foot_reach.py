@@ -14,7 +14,7 @@ import sys
 import mujoco
 
 from ppo_torchrl.compose import compose
-from ppo_torchrl.envs import make_batch
+from ppo_torchrl.envs.make import make_batch
 
 
 def main(model_file: str, overrides: list) -> None:

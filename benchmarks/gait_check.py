@@ -26,7 +26,7 @@ from cli_args import ConfigError, Parser, existing_dir, out_file, positive_int, 
 from cli_args import run as run_main
 
 import ppo_torchrl
-from ppo_torchrl.envs import episode_seeds, make_batch
+from ppo_torchrl.envs.make import episode_seeds, make_batch
 from ppo_torchrl.robots.gait import CORNERS, FOOT_PAIRS
 from ppo_torchrl.tasks.locomotion.sensors import Contacts
 from ppo_torchrl.tasks.locomotion.world import FOOT, NON_FOOT, OTHER

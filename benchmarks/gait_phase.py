@@ -18,9 +18,9 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type
 
 warnings.filterwarnings("ignore")
 
-from ppo_torchrl.checkpoint import load_policy  # noqa: E402
-from ppo_torchrl.envs import make_batch  # noqa: E402
-from ppo_torchrl.normalization import make_observation_normalizer  # noqa: E402
+from ppo_torchrl.run.checkpoint import load_policy  # noqa: E402
+from ppo_torchrl.envs.make import make_batch  # noqa: E402
+from ppo_torchrl.envs.normalization import make_observation_normalizer  # noqa: E402
 from ppo_torchrl.tasks.locomotion.sensors import Contacts  # noqa: E402
 
 BINS = 12

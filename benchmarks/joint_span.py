@@ -10,7 +10,7 @@ import numpy as np
 from hydra import compose, initialize_config_dir
 
 import ppo_torchrl.config  # noqa: F401  (registers the schemas)
-from ppo_torchrl.envs import ASSETS_DIR, make_batch
+from ppo_torchrl.envs.make import ASSETS_DIR, make_batch
 
 CONF = str(Path(__file__).resolve().parents[1] / "conf")
 

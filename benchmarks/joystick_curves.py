@@ -43,7 +43,7 @@ def smooth(frames, values, window: int = WINDOW):
 
 def finished(row: Path) -> bool:
     """The row's training is done: its summary.json says so (a crafted row without one counts as done)."""
-    from ppo_torchrl.lifecycle import unfinished
+    from ppo_torchrl.run.lifecycle import unfinished
 
     return not (row / "summary.json").is_file() or not unfinished(row)
 

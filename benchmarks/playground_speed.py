@@ -63,8 +63,8 @@ def collector_rate(task: str, num_envs: int, threads: int, frames: int) -> float
 
     from ppo_torchrl.collectors import make_collector
     from ppo_torchrl.compose import compose
-    from ppo_torchrl.envs import env_spec
-    from ppo_torchrl.models import make_actor_critic
+    from ppo_torchrl.envs.make import env_spec
+    from ppo_torchrl.rl.models import make_actor_critic
 
     cfg = compose(["experiment=playground_joystick", f"env.id={task}", f"collector.num_envs={num_envs}",
                    f"env.playground.threads={threads}"])

@@ -18,7 +18,7 @@ import sys
 import numpy as np
 
 from ppo_torchrl.compose import compose
-from ppo_torchrl.envs import make_batch
+from ppo_torchrl.envs.make import make_batch
 
 
 def main(model: str, overrides: list, episodes: int = 20) -> None:

@@ -33,7 +33,7 @@ from cli_args import ConfigError, Parser, goal, out_file
 from cli_args import run as run_main
 from robot_row import CURVES, SHARE, STRIDE_HZ, SWING_S, curves, load, long_swings
 
-from ppo_torchrl.envs import resolve_model_file
+from ppo_torchrl.envs.make import resolve_model_file
 from ppo_torchrl.records import has_record
 from ppo_torchrl.report import read_metrics
 from ppo_torchrl.robots.model import GRAVITY, read_robot

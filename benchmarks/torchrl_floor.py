@@ -31,8 +31,8 @@ from torchrl.data import Bounded, Categorical, Composite, Unbounded  # noqa: E40
 from torchrl.envs import CatFrames, DoubleToFloat, EnvBase, GymWrapper, TransformedEnv  # noqa: E402
 
 from conftest import compose_config  # noqa: E402
-from ppo_torchrl.envs import env_spec, make_gym_env, make_torchrl_env  # noqa: E402
-from ppo_torchrl.models import make_actor_critic, sampling_policy  # noqa: E402
+from ppo_torchrl.envs.make import env_spec, make_gym_env, make_torchrl_env  # noqa: E402
+from ppo_torchrl.rl.models import make_actor_critic, sampling_policy  # noqa: E402
 
 CAT = "+env.transforms.extra=[{_target_: torchrl.envs.CatFrames, N: 2, dim: -1, in_keys: [observation]}]"
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import yaml
 
-from ppo_torchrl.envs import resolve_model_file
+from ppo_torchrl.envs.make import resolve_model_file
 from ppo_torchrl.records import open_record
 from ppo_torchrl.robots.model import read_robot
 

@@ -23,7 +23,7 @@ if "pandas" not in sys.modules and importlib.util.find_spec("pandas") is None:
 if sys.argv[:1] == ["-m"]:
     from ppo_torchrl.cli import check_interpreter
     from ppo_torchrl.errors import guarded
-    from ppo_torchrl.signals import install_for_startup
+    from ppo_torchrl.run.signals import install_for_startup
 
     install_for_startup()
     guarded(check_interpreter)  # the system Python, not the project's: one line before the heavy imports fail

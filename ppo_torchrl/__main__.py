@@ -16,13 +16,13 @@ import sys
 from pathlib import Path
 from typing import Optional
 
-from ppo_torchrl import signals
+from ppo_torchrl.run import signals
 from ppo_torchrl.errors import EXIT_SIGNAL, guarded, signal_in_chain
 from ppo_torchrl.compose import compose, hydra_value, register_resolvers, show_job
 from ppo_torchrl.conf_files import CONF_DIR
 from ppo_torchrl.overrides import (HELP_FLAGS, INFO_FLAGS, checked_overrides, plain_keys, split_args, unquote,
                                    with_override)
-from ppo_torchrl.lifecycle import Lifecycle, Start
+from ppo_torchrl.run.lifecycle import Lifecycle, Start
 from ppo_torchrl.sweeps import (announce_study, dry_run, fail_running_trials, hydra_overrides, job_dirs, objective,
                                 run_seeds, stored_study, sweep_done, sweep_jobs)
 from ppo_torchrl.validation import validate_config
@@ -128,7 +128,7 @@ def cli() -> None:
     check_interpreter()  # the system Python of a checkout: one line that names the right one
     import hydra
 
-    from ppo_torchrl.loggers import quiet_mujoco
+    from ppo_torchrl.run.loggers import quiet_mujoco
 
     quiet_mujoco()  # from the first model the command's check compiles
 

@@ -114,7 +114,7 @@ def train(overrides: Iterable[str] = (), *, run_dir: Optional[PathLike] = None, 
     reaches the caller as KeyboardInterrupt (SIGTERM too), never as an Exception a loop over seeds would go on from."""
     from ppo_torchrl.compose import compose, hydra_value
     from ppo_torchrl.errors import ConfigError, Interrupted
-    from ppo_torchrl.lifecycle import Lifecycle
+    from ppo_torchrl.run.lifecycle import Lifecycle
     from ppo_torchrl.overrides import check_path, checked_overrides, key_of, plain_keys, split_args
     from ppo_torchrl.trainer import Trainer
 
@@ -160,7 +160,7 @@ def train(overrides: Iterable[str] = (), *, run_dir: Optional[PathLike] = None, 
 
 def load(run_dir: PathLike, checkpoint: str = "best") -> Policy:
     """A run's policy (checkpoint: best, last or a checkpoint file), ready to `predict`."""
-    from ppo_torchrl.checkpoint import load_policy, resolve_checkpoint
+    from ppo_torchrl.run.checkpoint import load_policy, resolve_checkpoint
     from ppo_torchrl.export import deployed_policy
 
     run_dir = _run_dir("load", run_dir)
@@ -189,7 +189,7 @@ def evaluate_run(run_dir: PathLike, episodes: int = 10, seed: int = 0, checkpoin
     """The eval's figures (return_mean, return_std, per-episode returns and lengths, ...) over `episodes`
     episodes from episode seeds seed * 1000 + i, as `python -m ppo_torchrl.evaluate` computes them; writes nothing.
     episodes and seed are checked as the CLI checks them (whole numbers, at most 10^6 episodes, 32-bit seeds)."""
-    from ppo_torchrl.checkpoint import load_policy, resolve_checkpoint
+    from ppo_torchrl.run.checkpoint import load_policy, resolve_checkpoint
     from ppo_torchrl.cli import check_episodes
     from ppo_torchrl.evaluate import evaluate_policy
 

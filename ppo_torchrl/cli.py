@@ -103,11 +103,11 @@ def print_help(usage: str, arguments: Dict[str, Tuple[str, Any]], about: str = "
 def run(main) -> None:
     """Run an entry point's main(argv) through the one error path (errors.py), signals included."""
     from ppo_torchrl.errors import guarded
-    from ppo_torchrl.signals import ignore_from_now, install
+    from ppo_torchrl.run.signals import ignore_from_now, install
 
     def checked(argv: list[str]):
         check_interpreter()
-        from ppo_torchrl.loggers import quiet_mujoco
+        from ppo_torchrl.run.loggers import quiet_mujoco
 
         quiet_mujoco()
         return main(argv)
@@ -128,7 +128,7 @@ def resolve_run(arg: str) -> Path:
     name, _, env = arg.partition("/")
     if name != LATEST or Path(arg).exists():
         return Path(arg)
-    from ppo_torchrl.rundir import MANIFEST, in_use
+    from ppo_torchrl.run.rundir import MANIFEST, in_use
 
     runs, envs = [], set()
     for root, dirs, files in os.walk(OUTPUTS):

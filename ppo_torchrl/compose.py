@@ -22,7 +22,7 @@ def run_name(experiment, env_choice, env_id, xml_file) -> str:
     if xml_file and env_choice == "mjcf" and Path(str(xml_file)).stem != "scene":
         robot = Path(str(xml_file)).stem
     elif xml_file and env_choice in ("mjcf", "legged"):
-        from ppo_torchrl.envs import resolve_model_file
+        from ppo_torchrl.envs.make import resolve_model_file
         from ppo_torchrl.robots.model import robot_label
 
         try:
@@ -97,7 +97,7 @@ def show_job(job: list[str], resolve: bool) -> None:
     from omegaconf import OmegaConf, open_dict, read_write
     from omegaconf.errors import OmegaConfBaseException
 
-    from ppo_torchrl.startup import not_applicable
+    from ppo_torchrl.run.startup import not_applicable
 
     cfg = compose(job)
     hidden = not_applicable(cfg)

@@ -81,7 +81,7 @@ def exit_code(error: BaseException) -> int:
 
 def message_of(error: BaseException) -> str:
     """The one line for an error (an internal one also gets its traceback written to a log)."""
-    from ppo_torchrl.signals import ON_DISK
+    from ppo_torchrl.run.signals import ON_DISK
 
     error = signal_in_chain(error) or error
     if isinstance(error, KeyboardInterrupt):  # a signal outside the training loop

@@ -29,13 +29,13 @@ import numpy as np
 import torch
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
-from ppo_torchrl.envs import batched, env_checks, env_label, episode_seeds, make_batch, make_torchrl_env
-from ppo_torchrl.filming import VIDEO_SIZE, EpisodeProgress, Filming, video_line
-from ppo_torchrl.env_state import env_state_of
+from ppo_torchrl.envs.make import batched, env_checks, env_label, episode_seeds, make_batch, make_torchrl_env
+from ppo_torchrl.envs.filming import VIDEO_SIZE, EpisodeProgress, Filming, video_line
+from ppo_torchrl.envs.state import env_state_of
 from ppo_torchrl.errors import ConfigError
-from ppo_torchrl.locks import read, releasing
+from ppo_torchrl.run.locks import read, releasing
 from ppo_torchrl.tasks import figures_kind, figures_module
-from ppo_torchrl.models import ActorCritic, deterministic_policy
+from ppo_torchrl.rl.models import ActorCritic, deterministic_policy
 
 def evaluate_policy(cfg, ac: ActorCritic, obs_stats: Optional[dict], episodes: int, seed: int,
                     deterministic: bool = True, video_path: Optional[Path] = None,
@@ -191,7 +191,7 @@ def apply_overrides(cfg, overrides: list[str]):
 
             raise ConfigError(f"cannot apply '{override}' to the run's config: {str(exc).splitlines()[0]}"
                               f"{key_hint(override.partition('=')[0], cfg)}") from None
-    from ppo_torchrl.env_values import check_env
+    from ppo_torchrl.envs.values import check_env
 
     check_env(cfg.env)  # as training checks it: finite, in range, named as typed (env_values.py)
     return cfg
@@ -203,7 +203,7 @@ TRACKING_FILES = ("tracking.json", "tracking.md", "tracking.png")
 def tracking_eval(cfg, ac, obs_stats, args: dict, out_dir: Path, run_dir: Path, label: str) -> dict:
     """tracking=true (tasks/joystick.py): the fixed command set, in the nominal world and, with extremes=true, at
     each corner of the run's randomization; tracking.json, tracking.md, tracking.png."""
-    from ppo_torchrl.rundir import atomic_write_bytes, atomic_write_json, record
+    from ppo_torchrl.run.rundir import atomic_write_bytes, atomic_write_json, record
     from ppo_torchrl.tasks import joystick
 
     results = {}
@@ -226,7 +226,7 @@ def tracking_eval(cfg, ac, obs_stats, args: dict, out_dir: Path, run_dir: Path, 
 def drive_eval(cfg, ac, obs_stats, driving, seed: int, out_dir: Path, run_dir: Path, label: str) -> dict:
     """drive= (tasks/joystick.py): one episode filmed through the command script, drive.mp4, and each
     segment's command against the velocity measured over it."""
-    from ppo_torchrl.rundir import record
+    from ppo_torchrl.run.rundir import record
     from ppo_torchrl.tasks.joystick import drive
 
     segments = drive(make_batch, cfg, ac, obs_stats, driving, out_dir / "drive.mp4", episode_seeds(seed, 1)[0],
@@ -241,7 +241,7 @@ def drive_eval(cfg, ac, obs_stats, driving, seed: int, out_dir: Path, run_dir: P
 
 def heights_eval(cfg, ac, obs_stats, heights, args: dict, out_dir: Path, run_dir: Path, label: str, writes) -> dict:
     """heights= (tasks/locomotion/sweep.py): the step task's episodes at each step height; its sweep files."""
-    from ppo_torchrl.rundir import record
+    from ppo_torchrl.run.rundir import record
     from ppo_torchrl.tasks.locomotion import sweep
 
     heights = sweep.heights_in_metres(heights, cfg.env, args["heights"])  # a unit note on stderr where due
@@ -255,13 +255,13 @@ def heights_eval(cfg, ac, obs_stats, heights, args: dict, out_dir: Path, run_dir
 
 @releasing  # the shared locks it takes (locks.read) go when it ends
 def main(argv: list[str]) -> dict:
-    from ppo_torchrl.checkpoint import check_same_env, check_spec, load_policy, resolve_checkpoint
-    from ppo_torchrl.checkpoint import label as checkpoint_label
+    from ppo_torchrl.run.checkpoint import check_same_env, check_spec, load_policy, resolve_checkpoint
+    from ppo_torchrl.run.checkpoint import label as checkpoint_label
     from ppo_torchrl.cli import check_episodes, parse_args, resolve_run
-    from ppo_torchrl.envs import env_spec
-    from ppo_torchrl.model_record import check_model
-    from ppo_torchrl.ownership import holder
-    from ppo_torchrl.rundir import atomic_write_json, check_replaceable, intend, output_dir_for, record, unwritable
+    from ppo_torchrl.envs.make import env_spec
+    from ppo_torchrl.run.model_record import check_model
+    from ppo_torchrl.run.ownership import holder
+    from ppo_torchrl.run.rundir import atomic_write_json, check_replaceable, intend, output_dir_for, record, unwritable
     from ppo_torchrl.usage import EVALUATE
 
     usage, spec, help, about = EVALUATE  # usage.py: --help answers before torch is imported

@@ -19,10 +19,10 @@ import torch
 from torch import nn
 
 from ppo_torchrl.errors import ConfigError
-from ppo_torchrl.locks import read, releasing
-from ppo_torchrl.models import ActorCritic, to_bounds
-from ppo_torchrl.normalization import make_observation_normalizer
-from ppo_torchrl.rundir import atomic_write_bytes
+from ppo_torchrl.run.locks import read, releasing
+from ppo_torchrl.rl.models import ActorCritic, to_bounds
+from ppo_torchrl.envs.normalization import make_observation_normalizer
+from ppo_torchrl.run.rundir import atomic_write_bytes
 
 
 class DeployedPolicy(nn.Module):
@@ -71,10 +71,10 @@ def export_policy(cfg, ac: ActorCritic, obs_stats: Optional[dict], path: Path, o
 
 @releasing  # the shared lock it takes (locks.read) goes when it ends
 def main(argv: list[str]) -> Path:
-    from ppo_torchrl.checkpoint import label, load_policy, resolve_checkpoint
+    from ppo_torchrl.run.checkpoint import label, load_policy, resolve_checkpoint
     from ppo_torchrl.cli import parse_args, resolve_run
-    from ppo_torchrl.ownership import holder
-    from ppo_torchrl.rundir import check_replaceable, is_run, output_dir_for, record, unwritable
+    from ppo_torchrl.run.ownership import holder
+    from ppo_torchrl.run.rundir import check_replaceable, is_run, output_dir_for, record, unwritable
     from ppo_torchrl.usage import EXPORT
 
     usage, spec, help, about = EXPORT  # usage.py: --help answers before torch is imported
@@ -112,7 +112,7 @@ def deploy_paths(target: Path) -> list:
 def _not_ours_outside_a_run(path: Path, new: bytes) -> Optional[str]:
     """Outside any run dir no manifest says what the app wrote: a file already at `path` with other bytes than
     `new` is a user's (or an older export's) and is left alone; one line says so."""
-    from ppo_torchrl.ownership import holder
+    from ppo_torchrl.run.ownership import holder
 
     if holder(path) is not None or not (path.exists() or path.is_symlink()):
         return None

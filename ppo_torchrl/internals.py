@@ -31,7 +31,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Optional
 
-from ppo_torchrl.env_state import PACKED, EnvState, pack, unpack
+from ppo_torchrl.envs.state import PACKED, EnvState, pack, unpack
 
 OWN = "fast"  # a collector's own entry in its state (its RNG); first FastCollector's, hence the name
 

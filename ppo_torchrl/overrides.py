@@ -139,7 +139,7 @@ def checked_overrides(overrides: list[str], compose) -> list[str]:
 
 def algo_line() -> str:
     """What `--algo ppo` (SB3's, rl-zoo's word) is told: there is no algorithm to choose, only PPO's loss."""
-    from ppo_torchrl.losses import LOSSES
+    from ppo_torchrl.rl.losses import LOSSES
 
     return ("this app is PPO already (clipped PPO: the default loss=clip_ppo), there is no algorithm to choose; "
             f"loss= picks the loss, one of {', '.join(LOSSES)} (loss=ppo is PPO without clipping)")
@@ -183,7 +183,7 @@ def check_env_override(overrides: list[str]) -> None:
 def env_hint(name: str, available: list[str]) -> str:
     import gymnasium as gym
 
-    from ppo_torchrl.envs_playground import playground_hint
+    from ppo_torchrl.envs.playground import playground_hint
 
     files = [n for n in available if n != "gym"]
     if name in gym.registry:

@@ -52,8 +52,8 @@ def compress(path: Union[str, Path]) -> Path:
     recorded earlier in the run), refused otherwise (another text, or not xz at all). Inside a run dir the record is
     the app's file like evaluate's outputs: listed in the run's manifest with its bytes' sha256 (write-ahead, then
     renamed into place), so overwrite=true takes the run whole, and an update replaces only a record the app wrote."""
-    from ppo_torchrl.ownership import holder
-    from ppo_torchrl.rundir import atomic_write_bytes, check_replaceable, record
+    from ppo_torchrl.run.ownership import holder
+    from ppo_torchrl.run.rundir import atomic_write_bytes, check_replaceable, record
 
     path = Path(path)
     out = path.with_name(path.name + SUFFIX)
@@ -83,7 +83,7 @@ RECORD = "record"  # the key a record checkpoint carries: what it left out
 
 def record_checkpoint(path: Union[str, Path]) -> Path:
     """Rewrite the checkpoint at `path` as a record checkpoint, in place (atomic): without the optimizer's state."""
-    from ppo_torchrl import checkpoint
+    from ppo_torchrl.run import checkpoint
 
     state = checkpoint.load(path)
     if state.pop("optimizer", None) is not None or RECORD not in state:
@@ -103,8 +103,8 @@ def main(argv: list) -> int:
     writes anything. Bad input is ConfigError (one line, exit 2 through cli.run); an OSError (a full disk, a file-size
     limit) is the app's one line, and no temp file stays."""
     from ppo_torchrl.errors import ConfigError
-    from ppo_torchrl.locks import hold, release_reads
-    from ppo_torchrl.ownership import holder
+    from ppo_torchrl.run.locks import hold, release_reads
+    from ppo_torchrl.run.ownership import holder
 
     if not argv or any(a.startswith("-") for a in argv):
         raise ConfigError(f"{'no FILE given' if not argv else repr(next(a for a in argv if a.startswith('-')))}; "

@@ -25,9 +25,9 @@ from pathlib import Path
 from typing import Dict, List
 
 from ppo_torchrl.errors import ConfigError
-from ppo_torchrl.locks import read, releasing
+from ppo_torchrl.run.locks import read, releasing
 from ppo_torchrl.records import has_record, open_record
-from ppo_torchrl.rundir import atomic_write_bytes, check_replaceable, is_run, record, unwritable
+from ppo_torchrl.run.rundir import atomic_write_bytes, check_replaceable, is_run, record, unwritable
 
 PANELS = [
     ("train/entropy", "policy entropy"),

@@ -60,7 +60,7 @@ def run_seeds(cfg, run_dir: Path, life) -> float:
     import copy
     import statistics
 
-    from ppo_torchrl import rundir
+    from ppo_torchrl.run import rundir
     from ppo_torchrl.trainer import train
 
     life.commit(run_dir)  # the trial's dir is the seed runs' parent: a seed stopped midway keeps its files

@@ -22,22 +22,26 @@ import torch
 from omegaconf import OmegaConf
 from tensordict import TensorDict
 
-from ppo_torchrl import checkpoint, rundir, startup
-from ppo_torchrl.advantage import explained_variance, make_advantage
-from ppo_torchrl.checkpoint import CheckpointManager, check_spec
+from ppo_torchrl.run import checkpoint
+
+from ppo_torchrl.run import rundir
+
+from ppo_torchrl.run import startup
+from ppo_torchrl.rl.advantage import explained_variance, make_advantage
+from ppo_torchrl.run.checkpoint import CheckpointManager, check_spec
 from ppo_torchrl.collectors import make_collector
-from ppo_torchrl.envs import EnvSpec, env_label, seed_everything
+from ppo_torchrl.envs.make import EnvSpec, env_label, seed_everything
 from ppo_torchrl.errors import ConfigError, Interrupted, TrainingError
-from ppo_torchrl.eval_worker import BackgroundEval, use_background_eval
+from ppo_torchrl.run.eval_worker import BackgroundEval, use_background_eval
 from ppo_torchrl.evaluate import evaluate_policy
-from ppo_torchrl.lifecycle import Lifecycle
-from ppo_torchrl.loggers import (COLUMNS, MetricsFile, Progress, amend_last_row, close_logger, make_logger,
+from ppo_torchrl.run.lifecycle import Lifecycle
+from ppo_torchrl.run.loggers import (COLUMNS, MetricsFile, Progress, amend_last_row, close_logger, make_logger,
                                  truncate_logs)
-from ppo_torchrl.losses import LOSS_INPUT_KEYS, LOSS_METRICS, NOT_COMPILABLE, make_loss, make_optimizer
-from ppo_torchrl.minibatch import make_minibatch_step
-from ppo_torchrl.model_record import model_record
-from ppo_torchrl.models import make_actor_critic
-from ppo_torchrl.signals import ON_DISK, Interrupt, StopRequest
+from ppo_torchrl.rl.losses import LOSS_INPUT_KEYS, LOSS_METRICS, NOT_COMPILABLE, make_loss, make_optimizer
+from ppo_torchrl.rl.minibatch import make_minibatch_step
+from ppo_torchrl.run.model_record import model_record
+from ppo_torchrl.rl.models import make_actor_critic
+from ppo_torchrl.run.signals import ON_DISK, Interrupt, StopRequest
 from ppo_torchrl.validation import resolve_device, validate_config
 
 
@@ -523,7 +527,7 @@ def train(cfg, run_dir: Path, resume: Optional[dict] = None, next_steps: bool = 
           life: Optional[Lifecycle] = None) -> dict:
     """Train a run to its end; its last lines say what it reached, where its files are and (next_steps) the
     commands to paste next."""
-    from ppo_torchrl.loggers import quiet_mujoco
+    from ppo_torchrl.run.loggers import quiet_mujoco
 
     quiet_mujoco()
     trainer = Trainer(cfg, run_dir, resume, spec, life)

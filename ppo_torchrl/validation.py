@@ -29,15 +29,15 @@ def validate_config(cfg, keep_env: bool = False, build_env: bool = True):
     """Raise ConfigError naming the first bad value; return the env's spec (shapes and bounds), built from the
     env itself; keep_env: with the env it built still open (`EnvSpec.env`, a training env's first). build_env=False:
     the values only, for a sweep's job whose env config an earlier job's check built (returns None)."""
-    from ppo_torchrl.advantage import ESTIMATORS
+    from ppo_torchrl.rl.advantage import ESTIMATORS
     from ppo_torchrl.collectors import CHOICES, resolve_backend
     from ppo_torchrl.config_data import transform_entry
-    from ppo_torchrl.envs import env_spec
-    from ppo_torchrl.eval_worker import BACKGROUND_CHOICES
-    from ppo_torchrl.loggers import LOGGERS
-    from ppo_torchrl.losses import KL_LOSSES, LOSSES, OPTIMIZERS, NOT_COMPILABLE
-    from ppo_torchrl.models import validate_policy_config
-    from ppo_torchrl.normalization import transforms_checks
+    from ppo_torchrl.envs.make import env_spec
+    from ppo_torchrl.run.eval_worker import BACKGROUND_CHOICES
+    from ppo_torchrl.run.loggers import LOGGERS
+    from ppo_torchrl.rl.losses import KL_LOSSES, LOSSES, OPTIMIZERS, NOT_COMPILABLE
+    from ppo_torchrl.rl.models import validate_policy_config
+    from ppo_torchrl.envs.normalization import transforms_checks
 
     missing = sorted(OmegaConf.missing_keys(cfg))
     if missing:
@@ -126,7 +126,7 @@ def validate_config(cfg, keep_env: bool = False, build_env: bool = True):
     for ok, message in checks:
         if not ok:
             raise ConfigError(message)
-    from ppo_torchrl.env_values import check_env
+    from ppo_torchrl.envs.values import check_env
 
     check_env(env)  # after the plain values: env=legged reads its model here
     if env.get("xml_file"):
@@ -174,7 +174,7 @@ def check_open_files(workers: int) -> None:
 def check_finite(cfg) -> None:
     """NaN nowhere; infinity only in a range or in the env's own make_kwargs (`optim.lr=inf` stopped at the
     first update before)."""
-    from ppo_torchrl.env_values import finite
+    from ppo_torchrl.envs.values import finite
 
     data = OmegaConf.to_container(cfg, resolve=True)
     data.pop("hydra", None)

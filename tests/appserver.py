@@ -40,7 +40,7 @@ def _preimport():
     before = dict(os.environ)
     import ppo_torchrl  # noqa: F401  (sets MUJOCO_GL and OPENBLAS_NUM_THREADS defaults as any launch does)
     import ppo_torchrl.__main__  # noqa: F401
-    import ppo_torchrl.envs  # noqa: F401
+    import ppo_torchrl.envs.make  # noqa: F401
     import ppo_torchrl.evaluate  # noqa: F401
     import ppo_torchrl.export  # noqa: F401
     import ppo_torchrl.records  # noqa: F401

@@ -57,7 +57,7 @@ def model_digests(model) -> dict:
 
 def record(overrides, steps: int, seed: int) -> dict:
     from conftest import compose_config
-    from ppo_torchrl.envs import make_gym_env
+    from ppo_torchrl.envs.make import make_gym_env
 
     env = make_gym_env(compose_config(overrides).env)
     data = env.unwrapped.data
@@ -94,7 +94,7 @@ def record(overrides, steps: int, seed: int) -> dict:
 def main() -> None:
     sys.path.insert(0, str(HERE))
     from conftest import compose_config
-    from ppo_torchrl.envs import make_gym_env
+    from ppo_torchrl.envs.make import make_gym_env
 
     everything = {}
     for case, (overrides, steps, seed) in CASES.items():

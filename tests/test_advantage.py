@@ -5,7 +5,7 @@ from tensordict import TensorDict
 from torch import nn
 from torchrl.modules import ValueOperator
 
-from ppo_torchrl.advantage import explained_variance, make_advantage
+from ppo_torchrl.rl.advantage import explained_variance, make_advantage
 from conftest import compose_config
 
 

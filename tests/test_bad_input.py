@@ -12,10 +12,10 @@ from pathlib import Path
 
 import pytest
 
-from ppo_torchrl import checkpoint
+from ppo_torchrl.run import checkpoint
 from ppo_torchrl.__main__ import prepare
-from ppo_torchrl.checkpoint import CheckpointManager
-from ppo_torchrl.lifecycle import resume_config
+from ppo_torchrl.run.checkpoint import CheckpointManager
+from ppo_torchrl.run.lifecycle import resume_config
 from ppo_torchrl.errors import Interrupted, TrainingError, guarded
 from ppo_torchrl.trainer import Trainer
 
@@ -93,7 +93,7 @@ def test_a_missing_gymnasium_extra_is_one_line(capsys, tmp_path):
 
 
 def test_mjcf_motor_without_ctrlrange_takes_its_forcerange_or_is_refused(capsys, tmp_path):
-    from ppo_torchrl.envs import env_spec
+    from ppo_torchrl.envs.make import env_spec
 
     from conftest import compose_config
 
@@ -216,7 +216,7 @@ def test_a_sweep_dir_that_holds_runs_is_refused(finished_run, tmp_path, capsys):
 
 @pytest.mark.parametrize("debug", [False, True])
 def test_an_internal_error_is_one_line_exit_1_and_its_traceback_in_the_run_dir(tmp_path, capsys, monkeypatch, debug):
-    from ppo_torchrl.signals import ON_DISK
+    from ppo_torchrl.run.signals import ON_DISK
 
     if debug:
         monkeypatch.setenv("PPO_TORCHRL_DEBUG", "1")

@@ -2,7 +2,9 @@ import numpy as np
 import pytest
 import torch
 
-from ppo_torchrl import checkpoint, rundir
+from ppo_torchrl.run import checkpoint
+
+from ppo_torchrl.run import rundir
 from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.trainer import Trainer
 

@@ -17,11 +17,11 @@ import torch
 from omegaconf import OmegaConf
 
 import ppo_torchrl
-from ppo_torchrl import checkpoint
+from ppo_torchrl.run import checkpoint
 from ppo_torchrl.config import run_config
 from ppo_torchrl.config_data import DATA_TRANSFORMS, read_yaml, transform_entry
 from ppo_torchrl.errors import ConfigError
-from ppo_torchrl.lifecycle import resume_config
+from ppo_torchrl.run.lifecycle import resume_config
 from ppo_torchrl.report import episode_kinds, sweep_runs
 from ppo_torchrl.trainer import Trainer
 

@@ -27,9 +27,9 @@ def test_an_output_is_listed_between_its_whole_temp_file_and_the_rename(tmp_path
     """export/report/evaluate write through atomic_write_bytes(owner=run dir): a write that fails leaves the
     manifest and the old file as they were; one cut after the listing leaves a file the app owns (the next
     command may replace it), never one that reads as the user's."""
-    from ppo_torchrl import rundir
+    from ppo_torchrl.run import rundir
     from ppo_torchrl.errors import ConfigError
-    from ppo_torchrl.lifecycle import Lifecycle
+    from ppo_torchrl.run.lifecycle import Lifecycle
 
     run = tmp_path / "run"
     life = Lifecycle()
@@ -85,8 +85,10 @@ def test_a_full_disk_or_a_kill_between_a_runs_write_and_its_listing_leaves_a_dir
     an internal error, and an internal error with no writable temp dir ended in a traceback from the error path."""
     import errno
 
-    from ppo_torchrl import errors, rundir
-    from ppo_torchrl.lifecycle import Lifecycle
+    from ppo_torchrl import errors
+
+    from ppo_torchrl.run import rundir
+    from ppo_torchrl.run.lifecycle import Lifecycle
 
     def fails(error):
         def call(*args, **kwargs):
@@ -128,7 +130,7 @@ def test_a_full_disk_or_a_kill_between_a_runs_write_and_its_listing_leaves_a_dir
         "error: a file reached the file size limit writing x.pt; raise the limit (ulimit -f)")
     assert errors.exit_code(OSError(errno.EFBIG, "File too large")) == 1
     monkeypatch.setattr(errors.tempfile, "mkstemp", fails(FileNotFoundError(2, "No usable temporary directory")))
-    from ppo_torchrl.signals import ON_DISK
+    from ppo_torchrl.run.signals import ON_DISK
 
     monkeypatch.setattr(ON_DISK, "started", False)  # no run of this process (another test's in-process run may be)
     line = errors.message_of(KeyError("a bug"))
@@ -162,9 +164,10 @@ def test_records_lists_what_it_writes_so_overwrite_takes_the_run(tmp_path, capsy
     listing it, so overwrite=true then refused the run ("it holds metrics.csv.xz, which this app did not write").
     The record is listed with its bytes' sha256, as evaluate's outputs are: overwrite=true takes the run; a prefix
     record the user put there is not replaced."""
-    from ppo_torchrl import records, rundir
+    from ppo_torchrl import records
+    from ppo_torchrl.run import rundir
     from ppo_torchrl.errors import ConfigError
-    from ppo_torchrl.lifecycle import Lifecycle
+    from ppo_torchrl.run.lifecycle import Lifecycle
 
     run, life = tmp_path / "run", Lifecycle()
     life.claim(run)

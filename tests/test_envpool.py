@@ -88,8 +88,8 @@ def test_the_reset_step_never_enters_a_batch(tiny_cfg):
 
     from ppo_torchrl.collectors import make_collector
     from ppo_torchrl.collectors.envpool_backend import EnvpoolCollector
-    from ppo_torchrl.envs import env_spec
-    from ppo_torchrl.models import make_actor_critic
+    from ppo_torchrl.envs.make import env_spec
+    from ppo_torchrl.rl.models import make_actor_critic
 
     cfg = tiny_cfg("env=Hopper-v4", "collector.backend=envpool", "collector.num_envs=4",
                    "collector.frames_per_batch=1024", "env.max_episode_steps=30")
@@ -148,8 +148,8 @@ def test_a_resume_keeps_statistics_and_rng_and_starts_new_episodes(tiny_cfg):
     import torch
 
     from ppo_torchrl.collectors import make_collector
-    from ppo_torchrl.envs import env_spec
-    from ppo_torchrl.models import make_actor_critic
+    from ppo_torchrl.envs.make import env_spec
+    from ppo_torchrl.rl.models import make_actor_critic
 
     cfg = tiny_cfg("env=Hopper-v4", "collector.backend=envpool", "collector.num_envs=2")
     ac = make_actor_critic(cfg.policy, env_spec(cfg.env))
@@ -200,8 +200,8 @@ def test_torchrls_multisync_collector_runs_it_in_workers(tiny_cfg):
     import torch
 
     from ppo_torchrl.collectors import make_collector
-    from ppo_torchrl.envs import env_spec
-    from ppo_torchrl.models import make_actor_critic
+    from ppo_torchrl.envs.make import env_spec
+    from ppo_torchrl.rl.models import make_actor_critic
 
     cfg = tiny_cfg("env=Hopper-v4", "collector.backend=envpool", "collector.workers=2", "collector.num_envs=2")
     ac = make_actor_critic(cfg.policy, env_spec(cfg.env))

@@ -44,7 +44,7 @@ def test_extending_a_run_continues_its_lr_schedule(tiny_cfg, tmp_path):
     end (before: back up to where a run of the new length would be, 0.5 -> 0.75 x optim.lr here)."""
     import csv
 
-    from ppo_torchrl import checkpoint
+    from ppo_torchrl.run import checkpoint
     from ppo_torchrl.trainer import Trainer
 
     cfg = tiny_cfg("collector.total_frames=512", "logger=csv")
@@ -62,7 +62,7 @@ def test_extending_a_run_continues_its_lr_schedule(tiny_cfg, tmp_path):
 def test_the_eta_leaves_the_warm_up_out(capsys, monkeypatch):
     """The first progress line has no ETA (its iteration holds the compile warm-up); later ones use the rate
     of the recent iterations, not the run's mean SPS that the warm-up drags down."""
-    from ppo_torchrl import loggers
+    from ppo_torchrl.run import loggers
 
     clock = iter([60.0, 61.0, 62.0])  # the first iteration ends after 60 s of warm-up, then 1 s per 1000 frames
     monkeypatch.setattr(loggers.time, "perf_counter", lambda: next(clock))
@@ -116,7 +116,7 @@ def test_every_hint_that_lists_robots_names_the_six_shipped_ones(tmp_path):
     """A wrong model path's hint listed the in-house models (quadruped.xml, ...) and not the six Menagerie robots; the
     --help page's env group named only the in-house ones."""
     from conftest import ROOT
-    from ppo_torchrl.envs import resolve_model_file
+    from ppo_torchrl.envs.make import resolve_model_file
     from ppo_torchrl.shipped import robots
 
     assert len(robots()) == 6

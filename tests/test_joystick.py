@@ -5,7 +5,7 @@ replayed, and the tracking figures on a robot that stands still (whose error is 
 import numpy as np
 import pytest
 
-from ppo_torchrl.envs import gym_make_kwargs
+from ppo_torchrl.envs.make import gym_make_kwargs
 from ppo_torchrl.tasks.locomotion.batch import LeggedBatchEnv
 from ppo_torchrl.tasks.locomotion.rewards import TERMS, Step
 
@@ -115,8 +115,8 @@ def test_the_tracking_error_of_a_robot_that_stands_is_its_command():
     """Zero actions hold the standing pose: the measured velocity is ~0, so each command's error is its size."""
     import torch
 
-    from ppo_torchrl.envs import env_spec, make_batch
-    from ppo_torchrl.models import make_actor_critic
+    from ppo_torchrl.envs.make import env_spec, make_batch
+    from ppo_torchrl.rl.models import make_actor_critic
     from ppo_torchrl.tasks.locomotion import tracking
 
     cfg = joystick("policy.log_std_init=-5")
@@ -152,9 +152,9 @@ def test_policy_json_is_the_observation_the_env_gives_and_the_deploy_script_driv
     import subprocess
     import sys
 
-    from ppo_torchrl.envs import env_spec
+    from ppo_torchrl.envs.make import env_spec
     from ppo_torchrl.export import export_deploy, export_policy
-    from ppo_torchrl.models import make_actor_critic
+    from ppo_torchrl.rl.models import make_actor_critic
     from ppo_torchrl.tasks.locomotion import deploy_mujoco
 
     cfg = joystick()
@@ -192,9 +192,9 @@ def test_a_drive_script_is_parsed_or_refused_in_one_line():
 
 def test_a_drive_segment_shorter_than_a_control_step_is_one_line(tmp_path):
     """A segment of 0.001 s rounds to no control step: its measured velocity was the mean of nothing (NaN)."""
-    from ppo_torchrl.envs import env_spec, make_batch
+    from ppo_torchrl.envs.make import env_spec, make_batch
     from ppo_torchrl.errors import ConfigError
-    from ppo_torchrl.models import make_actor_critic
+    from ppo_torchrl.rl.models import make_actor_critic
     from ppo_torchrl.tasks.locomotion.drive import drive
 
     cfg = joystick()
@@ -209,7 +209,7 @@ def test_a_joystick_runs_start_line_names_its_commands_not_a_step_and_a_target_s
     """The start line of experiment=legged_joystick said "step 10.7 cm (0.25 l), speed up to 0.71 m/s": a climb
     recipe's task, which a joystick run has not. It now says the commands' ranges in SI and how often they change;
     the climb recipes' line is as before."""
-    from ppo_torchrl.envs import resolve_model_file
+    from ppo_torchrl.envs.make import resolve_model_file
     from ppo_torchrl.robots.model import read_robot
     from ppo_torchrl.robots.recipe import describe
 
@@ -259,10 +259,10 @@ def test_the_asymmetric_critic_on_a_legged_run_reads_the_privileged_observation_
     import torch
 
     from ppo_torchrl.collectors import make_collector
-    from ppo_torchrl.envs import env_spec
+    from ppo_torchrl.envs.make import env_spec
     from ppo_torchrl.errors import ConfigError
-    from ppo_torchrl.layout import PRIVILEGED
-    from ppo_torchrl.models import make_actor_critic
+    from ppo_torchrl.envs.layout import PRIVILEGED
+    from ppo_torchrl.rl.models import make_actor_critic
 
     tiny = ["collector.num_envs=2", "collector.frames_per_batch=64", "collector.physics_threads=1",
             "policy.critic_obs=privileged"]

@@ -69,7 +69,7 @@ def test_each_robot_stands_for_two_seconds_at_its_derived_pose_under_its_derived
     within 20% of its standing height and tilts under 30 degrees, with only its feet (and A1's calves,
     Menagerie's geometry) on the floor."""
     from ppo_torchrl.compose import compose
-    from ppo_torchrl.envs import make_batch
+    from ppo_torchrl.envs.make import make_batch
 
     cfg = compose(["env=legged", f"env.xml_file={scene(folder)}", "env.locomotion.reset_noise_scale=0"])
     batch = make_batch(cfg.env, 1, threads=1)
@@ -96,7 +96,7 @@ def test_a_full_action_moves_a_joint_no_further_than_its_servo_saturates():
     the model) gets that angle: Go1 23.7 / 100 (hips) and 35.55 / 100 (knees), ANYmal B 40 / 100, Go2's torque
     motors their derived PD's 0.3 rad."""
     from ppo_torchrl.compose import compose
-    from ppo_torchrl.envs import make_batch
+    from ppo_torchrl.envs.make import make_batch
 
     expected = {"unitree_go1": [0.237, 0.237, 0.3555] * 4, "anybotics_anymal_b": [0.4] * 12, "unitree_go2": [0.3] * 12}
     for folder, scales in expected.items():
@@ -115,7 +115,7 @@ def test_the_legged_recipe_moves_every_joint_by_the_action_scale_and_explores_ge
     from omegaconf import OmegaConf
 
     from ppo_torchrl.compose import compose
-    from ppo_torchrl.envs import make_batch
+    from ppo_torchrl.envs.make import make_batch
     from ppo_torchrl.robots.model import read_robot
     from ppo_torchrl.robots.recipe import describe
 
@@ -135,7 +135,7 @@ def test_eval_measures_joint_torque_against_the_models_own_limits():
     """Standing (action 0) a Go1's servos hold well under their force range; driven to the ends of the action
     range they saturate: the peak share reaches 1.0 (the model's limit, not more) and the time at it shows."""
     from ppo_torchrl.compose import compose
-    from ppo_torchrl.envs import make_batch
+    from ppo_torchrl.envs.make import make_batch
     from ppo_torchrl.tasks.locomotion.evaluation import GaitBatch
 
     cfg = compose(["env=legged", f"env.xml_file={scene('unitree_go1')}", "env.locomotion.reset_noise_scale=0"])
@@ -158,7 +158,7 @@ def test_the_robustness_worlds_halve_every_contacts_grip_and_weigh_the_trunk_dow
     grip halves: halving the floor alone would leave a Go1's feet at 0.6 of 1.0); trunk_mass_scale=1.1: the trunk
     10% heavier, inertia too; a heavier trunk settles lower standing. The model file is not touched."""
     from ppo_torchrl.compose import compose
-    from ppo_torchrl.envs import make_batch
+    from ppo_torchrl.envs.make import make_batch
 
     text = scene("unitree_go1").parent.joinpath("go1.xml").read_text()
     envs = {}
@@ -193,7 +193,7 @@ def test_torque_motors_become_pd_servos_around_the_standing_pose_with_gains_from
     assert robot.kp[2] == pytest.approx(45.43 / PD_SATURATION_RAD)
     assert all(kd > 0 for kd in robot.kd)
     from ppo_torchrl.compose import compose
-    from ppo_torchrl.envs import make_batch
+    from ppo_torchrl.envs.make import make_batch
 
     batch = make_batch(compose(["env=legged", f"env.xml_file={scene('unitree_go2')}"]).env)
     batch.reset(seed=0)
@@ -209,7 +209,7 @@ def test_the_step_is_added_to_a_model_that_has_none_at_a_quarter_leg_length_and_
     """ANYmal B faces -x: its step (0.25 l = 14.7 cm in evaluation) lies ahead of it, made by MjSpec at build
     time; the model file is not touched."""
     from ppo_torchrl.compose import compose
-    from ppo_torchrl.envs import make_batch
+    from ppo_torchrl.envs.make import make_batch
 
     before = scene("anybotics_anymal_b").read_bytes(), (ROBOTS_DIR / "anybotics_anymal_b" / "anymal_b.xml").read_bytes()
     cfg = compose(["env=legged", f"env.xml_file={scene('anybotics_anymal_b')}"])
@@ -366,7 +366,7 @@ def test_a_filmed_robot_whose_visual_meshes_were_left_out_is_drawn():
     one showed an empty floor. A rendered env draws them (in its own copy: a training env keeps the model's
     groups), and the frame has the robot in it: grey pixels that are not there when its geoms stay hidden."""
     from ppo_torchrl.compose import compose
-    from ppo_torchrl.envs import make_batch
+    from ppo_torchrl.envs.make import make_batch
 
     cfg = compose(["env=legged", f"env.xml_file={scene('unitree_go1')}", "env.locomotion.reset_noise_scale=0"])
     plain = make_batch(cfg.env).models[0]
@@ -390,7 +390,7 @@ def test_a_step_of_height_zero_is_not_drawn():
     patches. Such a step is transparent (MuJoCo does not draw it) and the same box, raised, is drawn again;
     the frame at height 0 is the frame of a model whose step is far away."""
     from ppo_torchrl.compose import compose
-    from ppo_torchrl.envs import make_batch
+    from ppo_torchrl.envs.make import make_batch
 
     cfg = compose(["experiment=legged_trot", f"env.xml_file={scene('unitree_go2')}", "env.terrain.step_height=0",
                    "env.locomotion.reset_noise_scale=0"])
@@ -415,7 +415,7 @@ def test_unnamed_feet_go_by_their_corner_in_evals():
     """ANYmal B's and A1's foot spheres have no name: the gait line and the sweep's columns call them by their
     corner (they said 'foot 0'..'foot 3'); named feet keep their names."""
     from ppo_torchrl.compose import compose
-    from ppo_torchrl.envs import make_batch
+    from ppo_torchrl.envs.make import make_batch
 
     for folder, names in (("anybotics_anymal_b", None), ("unitree_a1", None), ("unitree_go1", ["FL", "FR", "RL", "RR"])):
         world = make_batch(compose(["env=legged", f"env.xml_file={scene(folder)}"]).env).world

@@ -11,7 +11,7 @@ import json
 import numpy as np
 import pytest
 
-from ppo_torchrl.envs import gym_make_kwargs
+from ppo_torchrl.envs.make import gym_make_kwargs
 from ppo_torchrl.tasks.locomotion.batch import LeggedBatchEnv
 
 from conftest import compose_config
@@ -135,8 +135,8 @@ def test_a_resume_collects_the_batch_the_uninterrupted_run_collects(scale):
     import torch
 
     from ppo_torchrl.collectors import make_collector
-    from ppo_torchrl.envs import env_spec
-    from ppo_torchrl.models import make_actor_critic
+    from ppo_torchrl.envs.make import env_spec
+    from ppo_torchrl.rl.models import make_actor_critic
 
     cfg = legged_config(GO1, *TINY_LEGGED, "env.max_episode_steps=20", *scale)
     ac = make_actor_critic(cfg.policy, env_spec(cfg.env))
@@ -165,8 +165,8 @@ def test_an_interrupted_legged_run_resumed_logs_what_the_uninterrupted_one_logs(
     import os
     import signal
 
-    from ppo_torchrl import checkpoint
-    from ppo_torchrl.lifecycle import resume_config
+    from ppo_torchrl.run import checkpoint
+    from ppo_torchrl.run.lifecycle import resume_config
     from ppo_torchrl.errors import Interrupted
     from ppo_torchrl.trainer import Trainer
 
@@ -202,7 +202,7 @@ def test_fixed_observation_statistics_are_fitted_on_a_one_row_batch_of_the_task(
     """env.transforms.obs_norm=fixed on env=legged: the statistics are the moments of random-action rollouts of a
     batch of one row of the task (envs.make_batch), reset where an episode ends, then frozen (a robot of a model file
     has no single Gymnasium env to fit them on)."""
-    from ppo_torchrl.envs import make_batch, make_torchrl_env
+    from ppo_torchrl.envs.make import make_batch, make_torchrl_env
 
     cfg = legged_config(GO1, "env.transforms.obs_norm=fixed", "env.transforms.obs_norm_init_frames=300")
     env = make_torchrl_env(cfg.env, clip_actions=True, gamma=0.99, seed=3)
@@ -221,8 +221,8 @@ def test_fixed_observation_statistics_are_fitted_on_a_one_row_batch_of_the_task(
 def test_metrics_csv_columns_of_a_task_are_the_tasks_own_not_the_loggers():
     """The logger's columns name no task (issue 72: the trainer logs what a task returns without naming it); a legged
     task declares its eval figures, its curriculum's level and success and each reward term's sum."""
-    from ppo_torchrl.env_rows import BatchRows
-    from ppo_torchrl.loggers import COLUMNS
+    from ppo_torchrl.envs.rows import BatchRows
+    from ppo_torchrl.run.loggers import COLUMNS
 
     assert not [c for c in COLUMNS if c.startswith(("env/", "reward/")) or c in ("eval/forward_velocity",
                                                                                  "eval/success_rate")]

@@ -5,10 +5,12 @@ from __future__ import annotations
 
 import pytest
 
-from ppo_torchrl import checkpoint, envs
+from ppo_torchrl.run import checkpoint
+
+from ppo_torchrl.envs import make as envs
 from ppo_torchrl.collectors.collection import Collection
 from ppo_torchrl.errors import ConfigError
-from ppo_torchrl.lifecycle import Lifecycle
+from ppo_torchrl.run.lifecycle import Lifecycle
 
 TINY = ["env=InvertedPendulum-v4", "collector.total_frames=512", "collector.frames_per_batch=256", "loss.epochs=1",
         "eval.every_frames=0", "eval.final_episodes=1", "eval.video=false", "logger=none", "torch_threads=1"]

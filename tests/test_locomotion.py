@@ -14,7 +14,7 @@ from omegaconf import OmegaConf
 
 from ppo_torchrl import evaluate
 from ppo_torchrl.tasks.locomotion import figures
-from ppo_torchrl.envs import gym_make_kwargs, make_batch
+from ppo_torchrl.envs.make import gym_make_kwargs, make_batch
 from ppo_torchrl.trainer import Trainer
 
 from conftest import TINY, compose_config

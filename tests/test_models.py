@@ -4,10 +4,10 @@ import torch
 from tensordict import TensorDict
 from torchrl.modules import TanhNormal
 
-from ppo_torchrl.envs import EnvSpec
+from ppo_torchrl.envs.make import EnvSpec
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
-from ppo_torchrl.models import NumpyPolicy, deterministic_action, deterministic_policy, make_actor_critic
+from ppo_torchrl.rl.models import NumpyPolicy, deterministic_action, deterministic_policy, make_actor_critic
 from conftest import compose_config
 
 SPEC = EnvSpec(obs_dim=5, action_dim=2, action_low=np.array([-1.0, -3.0], np.float32),
@@ -104,7 +104,7 @@ def test_bad_policy_option_is_a_config_error():
 
 
 def test_torchrl_env_clips_the_action_it_receives_per_dimension():
-    from ppo_torchrl.envs import ClipActionToBounds
+    from ppo_torchrl.envs.make import ClipActionToBounds
 
     clip = ClipActionToBounds(torch.tensor([-1.0, -0.4]), torch.tensor([1.0, 0.4]))
     td = clip.inv(TensorDict({"action": torch.tensor([[3.0, -3.0]])}, [1]))
@@ -130,7 +130,7 @@ def test_deterministic_policy_is_the_actor_in_deterministic_mode(head):
 def test_evaluate_and_the_exported_policy_act_alike_to_the_bit(tmp_path):
     """One map from mean to action (models.to_bounds) and one normalization arithmetic (float64, as the eval
     env's ObservationNorm): on 1,000 observations, most of them saturating the bounds, the same actions."""
-    from ppo_torchrl.envs import env_spec, make_torchrl_env
+    from ppo_torchrl.envs.make import env_spec, make_torchrl_env
     from ppo_torchrl.export import export_policy
 
     cfg = compose_config(["env=Hopper-v4"])

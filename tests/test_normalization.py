@@ -1,6 +1,6 @@
 import numpy as np
 
-from ppo_torchrl.normalization import ReturnNormalizer, RunningMeanStd
+from ppo_torchrl.envs.normalization import ReturnNormalizer, RunningMeanStd
 
 
 def test_running_stats_match_numpy_whatever_the_batching():
@@ -54,9 +54,9 @@ def test_both_backends_normalizers_give_numpys_mean_and_var_of_the_same_stream()
     import torch
     from torchrl.envs import RenameTransform
 
-    from ppo_torchrl.envs import make_torchrl_env
-    from ppo_torchrl.env_state import env_state_of
-    from ppo_torchrl.normalization import ObservationNormalizer, obs_scale
+    from ppo_torchrl.envs.make import make_torchrl_env
+    from ppo_torchrl.envs.state import env_state_of
+    from ppo_torchrl.envs.normalization import ObservationNormalizer, obs_scale
 
     from conftest import compose_config
 

@@ -1,4 +1,4 @@
-"""Issue 59, item 2: observations with a layout (ppo_torchrl/layout.py). Each env declares the named segments of its
+"""Issue 59, item 2: observations with a layout (ppo_torchrl/envs/layout.py). Each env declares the named segments of its
 observation and how each is scaled; the normalizer holds statistics only and applies the layout, and the layout
 travels with the statistics to checkpoints and export. A Go1's terrain heights read a 0.25 l step as 0.25 l
 whatever the running statistics saw; a run saved before the layout (one running segment) is normalized as it was."""
@@ -12,8 +12,8 @@ import pytest
 import torch
 
 from ppo_torchrl.errors import ConfigError
-from ppo_torchrl.layout import ObservationLayout, Segment
-from ppo_torchrl.normalization import ObservationNormalizer, make_observation_normalizer, obs_scale, standardize
+from ppo_torchrl.envs.layout import ObservationLayout, Segment
+from ppo_torchrl.envs.normalization import ObservationNormalizer, make_observation_normalizer, obs_scale, standardize
 
 ROOT = Path(__file__).resolve().parents[1]
 GO1 = ROOT / "ppo_torchrl" / "assets" / "menagerie" / "unitree_go1" / "scene.xml"
@@ -31,7 +31,7 @@ def go1_cfg(*overrides):
 
 
 def normalization_of(env):
-    from ppo_torchrl.normalization import ObservationNormalization
+    from ppo_torchrl.envs.normalization import ObservationNormalization
 
     return next(t for t in env.transform if isinstance(t, ObservationNormalization))
 
@@ -41,8 +41,8 @@ def test_a_go1_reads_a_quarter_leg_step_inside_the_clip_whatever_the_running_sta
     curriculum that never showed a step): the height segment still reads the flat ground ahead as 0 and the
     0.25 l step as 0.25, well inside its clip of 1, on the numpy face and TorchRL's alike; under one running
     normalization over everything (runs saved before issue 59) the same step read as the clip, 10."""
-    from ppo_torchrl.env_state import env_state_of
-    from ppo_torchrl.envs import make_torchrl_env
+    from ppo_torchrl.envs.state import env_state_of
+    from ppo_torchrl.envs.make import make_torchrl_env
 
     cfg, l = go1_cfg()
     env = make_torchrl_env(cfg.env, clip_actions=True, gamma=0.99, seed=0)
@@ -75,7 +75,7 @@ def test_a_go1_reads_a_quarter_leg_step_inside_the_clip_whatever_the_running_sta
 
 
 def test_the_go1_layout_is_derived_from_the_model_and_flags_and_clock_pass_as_they_are():
-    from ppo_torchrl.envs import make_batch
+    from ppo_torchrl.envs.make import make_batch
     from ppo_torchrl.robots.model import read_robot
     from ppo_torchrl.tasks.locomotion.task import HEIGHT_CLIP
 
@@ -98,7 +98,7 @@ def test_the_go1_layout_is_derived_from_the_model_and_flags_and_clock_pass_as_th
 
 
 def test_the_normalizer_holds_statistics_only_and_env_state_owns_what_each_policy_acts_on():
-    from ppo_torchrl.env_state import EnvState
+    from ppo_torchrl.envs.state import EnvState
 
     norm = ObservationNormalizer((5,), 10.0)
     assert set(vars(norm)) == {"stats", "clip", "epsilon", "enabled", "layout", "_vectors"}
@@ -113,10 +113,10 @@ def test_the_normalizer_holds_statistics_only_and_env_state_owns_what_each_polic
 def test_the_layout_travels_with_the_statistics_through_a_checkpoint_and_export_bakes_the_same_formula(tmp_path):
     """The statistics' state holds the layout; a checkpoint round trip gives it back; export's module (read from
     that state, no env) and the env's normalization (numpy and TorchRL faces) give the same values, bit for bit."""
-    from ppo_torchrl import checkpoint
-    from ppo_torchrl.envs import env_spec, make_torchrl_env
+    from ppo_torchrl.run import checkpoint
+    from ppo_torchrl.envs.make import env_spec, make_torchrl_env
     from ppo_torchrl.export import export_policy
-    from ppo_torchrl.models import make_actor_critic
+    from ppo_torchrl.rl.models import make_actor_critic
 
     cfg, _ = go1_cfg()
     env = make_torchrl_env(cfg.env, clip_actions=True, gamma=0.99, seed=0)
@@ -167,7 +167,7 @@ def test_a_legged_run_saved_before_the_layout_is_normalized_as_it_trained():
     from omegaconf import OmegaConf
 
     from ppo_torchrl.compose import compose
-    from ppo_torchrl.envs import make_batch
+    from ppo_torchrl.envs.make import make_batch
 
     cfg, _ = go1_cfg()
     assert cfg.env.legged.obs_layout == "segments"
@@ -197,9 +197,9 @@ def test_a_legged_run_saved_before_the_layout_is_normalized_as_it_trained():
 def test_the_go1_report_run_is_evaluated_with_the_normalization_it_trained_with():
     """results/robots/legged_2026-11-27/go1 (trained before issue 59): its config has no obs_layout and its statistics
     no layout, so its evaluation env normalizes the whole observation by its running statistics, as it trained."""
-    from ppo_torchrl.checkpoint import load_policy
-    from ppo_torchrl.env_state import env_state_of
-    from ppo_torchrl.envs import make_torchrl_env
+    from ppo_torchrl.run.checkpoint import load_policy
+    from ppo_torchrl.envs.state import env_state_of
+    from ppo_torchrl.envs.make import make_torchrl_env
 
     cfg, _, state = load_policy(GO1_RUN, str(GO1_RUN / "checkpoints" / "last.pt"))
     stats = state["normalization"]["obs"]

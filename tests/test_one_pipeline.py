@@ -10,9 +10,9 @@ from torchrl.collectors import Collector, MultiSyncCollector
 
 from ppo_torchrl.collectors import describe_backend, make_collector
 from ppo_torchrl.collectors.fast import FastCollector
-from ppo_torchrl.envs import env_spec, make_torchrl_env
-from ppo_torchrl.models import make_actor_critic
-from ppo_torchrl.normalization import make_observation_normalizer, standardize
+from ppo_torchrl.envs.make import env_spec, make_torchrl_env
+from ppo_torchrl.rl.models import make_actor_critic
+from ppo_torchrl.envs.normalization import make_observation_normalizer, standardize
 
 
 def test_torchrls_multisync_collector_runs_the_fast_collector_as_its_collector_class(tiny_cfg):
@@ -97,7 +97,7 @@ def test_the_start_line_names_the_collector_and_why(tiny_cfg):
 def test_a_change_to_the_one_formula_reaches_every_face(tiny_cfg, monkeypatch):
     """`normalization.standardize` changed in its one place: the fast rollout, TorchRL's Collector's env, the
     evaluation env and the exported module all follow."""
-    import ppo_torchrl.normalization as normalization
+    import ppo_torchrl.envs.normalization as normalization
 
     monkeypatch.setattr(normalization, "standardize", lambda x, mean, scale, bound: x * 0 + 7)
     cfg = tiny_cfg()
@@ -123,7 +123,7 @@ def test_episode_counts_have_one_owner_gymnasiums_counter_which_a_resumed_episod
     """TorchRL's path writes `episode_reward` / `step_count` from Gymnasium's RecordEpisodeStatistics (as
     the fast rollout reads them): the raw return so far, and after a restored position the saved episode
     goes on counting from where it was, not from 0."""
-    from ppo_torchrl.env_state import env_state_of
+    from ppo_torchrl.envs.state import env_state_of
 
     cfg = tiny_cfg()
     stats = {"mean": np.zeros(4), "var": np.ones(4), "count": 2.0}

@@ -14,7 +14,7 @@ envpool = pytest.importorskip("envpool")
 
 from conftest import TINY, compose_config, run_cli  # noqa: E402
 from ppo_torchrl.errors import ConfigError  # noqa: E402
-from ppo_torchrl.layout import PRIVILEGED  # noqa: E402
+from ppo_torchrl.envs.layout import PRIVILEGED  # noqa: E402
 
 GO1 = "Go1JoystickFlatTerrain-v1"
 
@@ -26,8 +26,8 @@ def go1_cfg(*overrides):
 def collection_of(cfg, seed=3, ac=None):
     """(actor-critic, Collection) of cfg; `ac`: this one's weights (a resume's networks are the checkpoint's)."""
     from ppo_torchrl.collectors import make_collector
-    from ppo_torchrl.envs import env_spec
-    from ppo_torchrl.models import make_actor_critic
+    from ppo_torchrl.envs.make import env_spec
+    from ppo_torchrl.rl.models import make_actor_critic
 
     ac = ac if ac is not None else make_actor_critic(cfg.policy, env_spec(cfg.env))
     return ac, make_collector(cfg, ac, seed, torch.device("cpu"))
@@ -37,8 +37,8 @@ def test_a_playground_tasks_dict_observation_is_the_actors_layout_and_the_critic
     """state is the observation (one running segment of that name, the actor's), privileged_state the privileged
     observation with a layout and statistics of its own; the actions are the task's range, read from EnvPool's spec;
     num_envs envs are views of one pool, env i stepping pool env i; a task of one vector has no privileged one."""
-    from ppo_torchrl.env_state import env_state_of
-    from ppo_torchrl.envs import env_spec, make_torchrl_env
+    from ppo_torchrl.envs.state import env_state_of
+    from ppo_torchrl.envs.make import env_spec, make_torchrl_env
 
     cfg = go1_cfg()
     spec = env_spec(cfg.env)
@@ -176,8 +176,8 @@ def test_the_asymmetric_critic_reads_the_privileged_observation_and_the_actor_do
     observation (48); GAE and ClipPPOLoss read the critic's key through them. On a collected batch: changing the
     privileged observation changes the values, the advantages and the critic's loss, not the actor's output;
     changing the observation changes the actor's, not the values. The default critic reads the observation."""
-    from ppo_torchrl.advantage import make_advantage
-    from ppo_torchrl.losses import make_loss
+    from ppo_torchrl.rl.advantage import make_advantage
+    from ppo_torchrl.rl.losses import make_loss
 
     cfg = go1_cfg("collector.num_envs=2", "policy.critic_obs=privileged")
     ac, collection = collection_of(cfg)
@@ -213,8 +213,8 @@ def test_the_asymmetric_critic_reads_the_privileged_observation_and_the_actor_do
     shifted = flat.clone()
     shifted.set(PRIVILEGED, flat[PRIVILEGED] + 1.0)
     assert not torch.allclose(loss(shifted)["loss_critic"], critic_loss)
-    from ppo_torchrl.models import make_actor_critic
-    from ppo_torchrl.envs import env_spec
+    from ppo_torchrl.rl.models import make_actor_critic
+    from ppo_torchrl.envs.make import env_spec
 
     default = make_actor_critic(go1_cfg().policy, env_spec(go1_cfg().env))
     assert list(default.critic.in_keys) == ["observation"] and default.critic.module[0][0].in_features == 48
@@ -223,9 +223,9 @@ def test_the_asymmetric_critic_reads_the_privileged_observation_and_the_actor_do
 def test_export_carries_the_actor_only(tmp_path):
     """policy.pt of an asymmetric-critic run: `state`-sized input (48) in, the deterministic action out, the actor's
     weights and nothing of the critic's; a privileged-sized input is refused."""
-    from ppo_torchrl.envs import env_spec
+    from ppo_torchrl.envs.make import env_spec
     from ppo_torchrl.export import export_policy
-    from ppo_torchrl.models import deterministic_action, make_actor_critic
+    from ppo_torchrl.rl.models import deterministic_action, make_actor_critic
 
     cfg = go1_cfg("policy.critic_obs=privileged")
     ac = make_actor_critic(cfg.policy, env_spec(cfg.env))
@@ -245,7 +245,7 @@ def test_export_carries_the_actor_only(tmp_path):
 
 @pytest.mark.parametrize("task", [GO1, "PandaRobotiqPushCube-v1"])  # the second's model has no camera
 def test_a_frame_is_filmed_from_envpools_own_renderer(task):
-    from ppo_torchrl.envs_playground import make_playground_env
+    from ppo_torchrl.envs.playground import make_playground_env
 
     env = make_playground_env(compose_config(["env=playground", f"env.id={task}"]).env, "rgb_array", width=64, height=48)
     try:
@@ -281,7 +281,7 @@ def test_bad_input_is_one_line(overrides, says):
 def test_envpool_missing_says_how_to_install_it(monkeypatch):
     import sys
 
-    from ppo_torchrl.envs_playground import _envpool
+    from ppo_torchrl.envs.playground import _envpool
 
     monkeypatch.setitem(sys.modules, "envpool", None)  # `import envpool` raises ImportError, as without the extra
     with pytest.raises(ConfigError, match=r'env=playground needs EnvPool, which is not installed: pip install -e "\.\[envpool\]"'):

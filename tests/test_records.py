@@ -91,7 +91,7 @@ def test_a_compressed_metrics_record_reads_as_the_plain_one(tmp_path):
 def test_a_resume_keeps_the_bytes_of_the_rows_before_its_checkpoint(tmp_path):
     """truncate_logs (resume) drops the rows past the checkpoint and keeps the others byte for byte: the csv
     module's \\r\\n stays, so the log stays a prefix of itself and a mid-run record of it can be brought up to date."""
-    from ppo_torchrl.loggers import MetricsFile, truncate_logs
+    from ppo_torchrl.run.loggers import MetricsFile, truncate_logs
 
     log = MetricsFile(tmp_path / "metrics.csv", ["iteration", "frames", "x"])
     for i in range(1, 5):

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 import torch
 
-from ppo_torchrl import checkpoint
-from ppo_torchrl.lifecycle import resume_config
+from ppo_torchrl.run import checkpoint
+from ppo_torchrl.run.lifecycle import resume_config
 from ppo_torchrl.errors import ConfigError, Interrupted, TrainingError
 from ppo_torchrl.trainer import Trainer
 

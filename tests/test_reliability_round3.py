@@ -13,7 +13,11 @@ import time
 
 import pytest
 
-from ppo_torchrl import checkpoint, lifecycle, rundir
+from ppo_torchrl.run import checkpoint
+
+from ppo_torchrl.run import lifecycle
+
+from ppo_torchrl.run import rundir
 from ppo_torchrl.errors import Interrupted, exit_code, guarded, message_of
 from ppo_torchrl.trainer import Trainer
 
@@ -224,7 +228,7 @@ def test_a_signal_that_a_library_wrapped_during_imports_is_an_interrupt():
 
 
 def test_a_killed_eval_process_is_restarted_and_the_run_finishes(tiny_cfg, tmp_path, capsys, monkeypatch):
-    from ppo_torchrl import eval_worker
+    from ppo_torchrl.run import eval_worker
 
     trainer = Trainer(tiny_cfg("collector.total_frames=1024", "eval.every_frames=256", "eval.background=true"), tmp_path)
     submit = eval_worker.BackgroundEval.submit

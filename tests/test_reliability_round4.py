@@ -15,8 +15,8 @@ from pathlib import Path
 import pytest
 
 from conftest import ROOT, run_cli
-from ppo_torchrl import rundir
-from ppo_torchrl.lifecycle import Lifecycle
+from ppo_torchrl.run import rundir
+from ppo_torchrl.run.lifecycle import Lifecycle
 from test_bad_input import finished_run, refused, tree_digest  # noqa: F401  (the module's finished run)
 from test_reliability_round3 import RUN, copy_of
 
@@ -241,9 +241,9 @@ import multiprocessing, os, signal, sys, threading, torch
 sys.path.insert(0, {tests!r})
 from conftest import TINY, compose_config
 from ppo_torchrl.collectors import make_collector
-from ppo_torchrl.envs import env_spec
+from ppo_torchrl.envs.make import env_spec
 from ppo_torchrl.errors import EnvironmentFault
-from ppo_torchrl.models import make_actor_critic
+from ppo_torchrl.rl.models import make_actor_critic
 
 if __name__ == "__main__":
     cfg = compose_config(["env=InvertedPendulum-v4", *TINY, "collector.workers=2", "collector.num_envs=2"])
@@ -286,7 +286,7 @@ def test_a_dead_worker_ends_any_wait_of_the_main_process(tmp_path):
 def test_a_sweep_into_a_run_dir_is_told_it_holds_a_run_not_foreign_files(tmp_path):
     """A `-m` sweep whose hydra.sweep.dir is a run (a trial's, with .hydra/ and seed<k>/ runs) answers by the
     dir's manifest: 'already holds', with overwrite=true to replace it, not 'files this app did not write'."""
-    from ppo_torchrl import rundir
+    from ppo_torchrl.run import rundir
     from ppo_torchrl.errors import ConfigError
 
     run = tmp_path / "trial"
@@ -307,7 +307,7 @@ def test_a_sweep_into_a_run_dir_is_told_it_holds_a_run_not_foreign_files(tmp_pat
 def test_a_sweep_killed_before_it_listed_hydras_multirun_yaml_can_be_overwritten(tmp_path):
     """kill -9 of a `-m` sweep after Hydra wrote multirun.yaml and before the sweep's listing (found by
     benchmarks/data_safety.py --real): the dir is still the app's, and overwrite=true takes it."""
-    from ppo_torchrl import rundir
+    from ppo_torchrl.run import rundir
     from ppo_torchrl.errors import ConfigError
 
     sweep = tmp_path / "sweep"

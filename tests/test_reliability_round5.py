@@ -12,8 +12,9 @@ import time
 import pytest
 
 from conftest import ran, run_cli
-from ppo_torchrl import evaluate, export, report, rundir
-from ppo_torchrl.lifecycle import Lifecycle
+from ppo_torchrl import evaluate, export, report
+from ppo_torchrl.run import rundir
+from ppo_torchrl.run.lifecycle import Lifecycle
 from test_bad_input import finished_run, refused, tree_digest  # noqa: F401  (the module's finished run)
 from test_reliability_round3 import RUN, copy_of
 
@@ -113,7 +114,7 @@ def test_a_write_cut_after_its_listing_leaves_a_file_the_next_command_replaces(t
     """The listing names the old bytes and the new ones until the write is recorded: a kill before the rename
     (the old file) or after it (the new one) leaves a file the app may replace; a user's bytes are refused."""
     from ppo_torchrl.errors import ConfigError
-    from ppo_torchrl.ownership import digest
+    from ppo_torchrl.run.ownership import digest
 
     run = tmp_path / "run"
     life = Lifecycle()

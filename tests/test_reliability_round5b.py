@@ -128,7 +128,7 @@ def test_resume_and_evaluate_refuse_a_robot_model_changed_since_the_run(go1_run,
         assert tree_digest(run) == before
     finally:
         model.write_text(original)
-    from ppo_torchrl.lifecycle import Lifecycle
+    from ppo_torchrl.run.lifecycle import Lifecycle
 
     life = Lifecycle()
     try:  # the model it trained on: accepted
@@ -139,7 +139,7 @@ def test_resume_and_evaluate_refuse_a_robot_model_changed_since_the_run(go1_run,
 
 def test_a_checkpoint_that_recorded_no_model_is_not_checked(tiny_cfg):
     """A run of an earlier version (no `model` in its checkpoints), or of a Gymnasium env: accepted silently."""
-    from ppo_torchrl.model_record import check_model
+    from ppo_torchrl.run.model_record import check_model
 
     cfg = compose_config(["env=legged", f"env.xml_file={GO1 / 'scene.xml'}"])
     check_model({"frames": 256}, cfg.env, "resume=old")
@@ -214,7 +214,7 @@ def test_help_comes_before_the_heavy_imports(module):
 def test_progress_lines_come_at_most_print_every_s_apart(monkeypatch, capsys):
     """Plain progress lines (not a terminal) every <= logger.print_every_s (10 s), as the README says: they came
     at the first iteration after 10 s: 10.4 s apart with 1.3 s iterations."""
-    from ppo_torchrl import loggers
+    from ppo_torchrl.run import loggers
 
     clock = [0.0]
     monkeypatch.setattr(loggers.time, "perf_counter", lambda: clock[0])
@@ -236,7 +236,7 @@ def test_a_dir_left_with_only_the_manifests_temp_file_names_the_run_moved_aside(
     held only that temp file. resume= said it needs checkpoints/last.pt, and a new run or an overwrite refused the
     temp file as not the app's (5 of 5 tries). Now resume= and evaluate name the sibling that holds the run, a new
     run takes the dir, and its start names the sibling."""
-    from ppo_torchrl.lifecycle import Lifecycle
+    from ppo_torchrl.run.lifecycle import Lifecycle
 
     run = tmp_path / "run"
     aside = copy_of(finished_run, tmp_path).rename(tmp_path / "run.replaced-20261128-120000")
@@ -262,9 +262,9 @@ def test_a_full_disk_as_an_overwrite_begins_puts_the_old_run_back(finished_run, 
     command named: the claim now rolls back, the old run in its own dir again and no sibling left."""
     import errno
 
-    from ppo_torchrl import rundir
+    from ppo_torchrl.run import rundir
     from ppo_torchrl.errors import ConfigError
-    from ppo_torchrl.lifecycle import Lifecycle
+    from ppo_torchrl.run.lifecycle import Lifecycle
 
     run = copy_of(finished_run, tmp_path)
     before = tree_digest(run)
@@ -290,9 +290,9 @@ def test_a_trial_of_a_sweep_killed_in_a_seed_leaves_a_sweep_the_next_command_tak
     overwrite=true, called the sweep's files not the app's (the trial's manifest answered for its seed's files),
     and resume=<sweep>/0 said its seeds were all finished. Now the sweep dir is a sweep (overwrite=true replaces
     it), and resume names the stopped seed and the command that runs the study on."""
-    from ppo_torchrl import rundir
+    from ppo_torchrl.run import rundir
     from ppo_torchrl.errors import ConfigError
-    from ppo_torchrl.lifecycle import Lifecycle
+    from ppo_torchrl.run.lifecycle import Lifecycle
 
     sweep, write = tmp_path / "sweep", lambda path, text: rundir.atomic_write_bytes(path, lambda f: f.write(text))
     life = Lifecycle()
@@ -338,7 +338,7 @@ def test_an_internal_error_before_a_run_started_logs_where_the_rollback_leaves_i
     import re
 
     from ppo_torchrl.errors import guarded
-    from ppo_torchrl.signals import ON_DISK
+    from ppo_torchrl.run.signals import ON_DISK
 
     monkeypatch.setattr(ON_DISK, "run_dir", tmp_path)
     monkeypatch.setattr(ON_DISK, "started", False)
@@ -411,7 +411,7 @@ def test_a_run_killed_before_its_first_checkpoint_is_not_offered_resume(finished
     import shutil
 
     from ppo_torchrl.errors import ConfigError
-    from ppo_torchrl.lifecycle import Lifecycle
+    from ppo_torchrl.run.lifecycle import Lifecycle
 
     run = copy_of(finished_run, tmp_path)
     shutil.rmtree(run / "checkpoints")

@@ -19,10 +19,12 @@ import numpy as np
 import pytest
 
 import ppo_torchrl
-from ppo_torchrl import checkpoint, evaluate, records, report
+from ppo_torchrl import evaluate, report
+from ppo_torchrl.run import checkpoint
+from ppo_torchrl import records
 from ppo_torchrl.__main__ import prepare
 from ppo_torchrl.errors import ConfigError
-from ppo_torchrl.lifecycle import Lifecycle
+from ppo_torchrl.run.lifecycle import Lifecycle
 from ppo_torchrl.trainer import Trainer
 
 from conftest import ROOT, TINY, compose_config, ran
@@ -392,7 +394,7 @@ def test_filming_a_non_mujoco_env_leaves_its_floor_alone():
     AttributeError on geom_type, so video=true of such a run ended in a traceback."""
     import gymnasium as gym
 
-    from ppo_torchrl.mjcf import floor_to_the_horizon
+    from ppo_torchrl.envs.mjcf import floor_to_the_horizon
 
     env = gym.make("Pendulum-v1", render_mode="rgb_array")
     floor_to_the_horizon(env.unwrapped)  # nothing to widen, no error

@@ -22,7 +22,7 @@ GO1 = ROBOTS_DIR / "unitree_go1" / "scene.xml"
 def go1(*overrides):
     """A one-row batch of recipe v2's Go1, its curriculum off."""
     from ppo_torchrl.compose import compose
-    from ppo_torchrl.envs import make_batch
+    from ppo_torchrl.envs.make import make_batch
 
     cfg = compose(["experiment=legged_trot_v2", f"env.xml_file={GO1}", "env.terrain.curriculum=false", *overrides])
     return make_batch(cfg.env, 1, threads=1)
@@ -204,7 +204,7 @@ def test_the_rule_keeps_each_bound_and_a_saved_run_keeps_its_model_s_step():
 
     from ppo_torchrl.compose import compose
     from ppo_torchrl.config import Config
-    from ppo_torchrl.envs import make_batch
+    from ppo_torchrl.envs.make import make_batch
     from ppo_torchrl.robots.model import read_robot
     from ppo_torchrl.robots.recipe import DAMPING_STEP, SERVO_PHASE, rule_dt
 

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import torch
 
-from ppo_torchrl import checkpoint
-from ppo_torchrl.envs import ASSETS_DIR, make_batch
+from ppo_torchrl.run import checkpoint
+from ppo_torchrl.envs.make import ASSETS_DIR, make_batch
 from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.trainer import Trainer
 from conftest import compose_config, run_cli
@@ -120,12 +120,12 @@ def test_init_from_refuses_what_does_not_fit(tiny_cfg, tmp_path):
 
 def test_eval_env_keeps_the_models_frame_skip_and_time_limit(tiny_cfg):
     """The TorchRL env used for eval must step the same MuJoCo env (GymEnv would eat frame_skip)."""
-    from ppo_torchrl.envs import make_torchrl_env
+    from ppo_torchrl.envs.make import make_torchrl_env
 
     cfg = tiny_cfg("env=quadruped", "env.max_episode_steps=30", "env.locomotion.healthy_z_range=[0.0,5.0]")
     env = make_torchrl_env(cfg.env, clip_actions=True, gamma=0.99, obs_stats={"mean": np.zeros(35), "var": np.ones(35)},
                            train=False)
-    from ppo_torchrl.env_state import env_state_of
+    from ppo_torchrl.envs.state import env_state_of
 
     assert env_state_of(env).rows.batch.world.frame_skip == 4  # a model file's robot: the batched env
     rollout = env.rollout(1000, break_when_any_done=True)
@@ -138,7 +138,7 @@ def test_shipped_quadrupeds_joint_ranges_cover_their_actuators_targets(model):
     radians). quadruped.xml once wrote radians under angle="degree" and its legs barely bent."""
     import mujoco
 
-    from ppo_torchrl.envs import resolve_model_file
+    from ppo_torchrl.envs.make import resolve_model_file
 
     m = mujoco.MjModel.from_xml_path(str(resolve_model_file(model)))
     for a in range(m.nu):

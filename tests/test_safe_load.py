@@ -16,9 +16,9 @@ import numpy as np
 import pytest
 import torch
 
-from ppo_torchrl import checkpoint
+from ppo_torchrl.run import checkpoint
 from ppo_torchrl.__main__ import prepare
-from ppo_torchrl.env_state import PACKED, pack, unpack
+from ppo_torchrl.envs.state import PACKED, pack, unpack
 from ppo_torchrl.errors import ConfigError, guarded
 from ppo_torchrl.trainer import Trainer
 

@@ -4,10 +4,10 @@ import time
 
 import pytest
 
-from ppo_torchrl import checkpoint
-from ppo_torchrl.lifecycle import resume_config
+from ppo_torchrl.run import checkpoint
+from ppo_torchrl.run.lifecycle import resume_config
 from ppo_torchrl.errors import ConfigError
-from ppo_torchrl.startup import describe_start
+from ppo_torchrl.run.startup import describe_start
 from ppo_torchrl.trainer import Trainer
 
 from conftest import compose_config
@@ -91,7 +91,7 @@ def test_end_lines_say_what_the_run_reached_and_what_to_paste_next():
     import sys
     from pathlib import Path
 
-    from ppo_torchrl.startup import describe_end
+    from ppo_torchrl.run.startup import describe_end
 
     lines = describe_end(SUMMARY).splitlines()
     assert lines[0] == ("done: Hopper-v4, 1,001,472 frames in 1 h 02 min; final eval 3301.3 +- 12.0, best 3350.0; "
@@ -112,7 +112,7 @@ def test_end_lines_say_what_the_run_reached_and_what_to_paste_next():
 def test_mujocos_deprecation_warning_about_gymnasiums_model_is_not_printed(tmp_path, monkeypatch, capfd):
     import gymnasium as gym
 
-    from ppo_torchrl.loggers import quiet_mujoco
+    from ppo_torchrl.run.loggers import quiet_mujoco
 
     monkeypatch.chdir(tmp_path)
     quiet_mujoco()

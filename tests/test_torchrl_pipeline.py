@@ -9,9 +9,9 @@ import torch
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
 from ppo_torchrl import evaluate, export
-from ppo_torchrl.checkpoint import load_policy
+from ppo_torchrl.run.checkpoint import load_policy
 from ppo_torchrl.collectors import resolve_backend
-from ppo_torchrl.normalization import make_observation_normalizer
+from ppo_torchrl.envs.normalization import make_observation_normalizer
 from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.trainer import Trainer
 

@@ -9,8 +9,8 @@ import torch
 
 from ppo_torchrl.collectors.collection import Collection
 from ppo_torchrl.collectors.fast import FastCollector
-from ppo_torchrl.losses import LOSS_INPUT_KEYS
-from ppo_torchrl.minibatch import EagerStep, FusedStep
+from ppo_torchrl.rl.losses import LOSS_INPUT_KEYS
+from ppo_torchrl.rl.minibatch import EagerStep, FusedStep
 from ppo_torchrl.trainer import Trainer, use_compile
 
 LOSSES = ["clip_ppo", "kl_ppo", "ppo", "a2c", "reinforce"]

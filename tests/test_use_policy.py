@@ -14,10 +14,10 @@ from tensordict import TensorDict
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
 from ppo_torchrl import evaluate, export, report
-from ppo_torchrl.checkpoint import load_policy
+from ppo_torchrl.run.checkpoint import load_policy
 from ppo_torchrl.evaluate import evaluate_policy
-from ppo_torchrl.filming import EpisodeProgress
-from ppo_torchrl.loggers import Progress
+from ppo_torchrl.envs.filming import EpisodeProgress
+from ppo_torchrl.run.loggers import Progress
 from ppo_torchrl.trainer import Trainer
 
 from conftest import ROOT, run_cli
@@ -94,8 +94,8 @@ def test_video_follows_the_robot_at_real_time(tmp_path):
     97-step episode at 125 Hz (a frame per 5 steps, 25 fps: 30 at most) lasts its 0.776 s of simulated time."""
     from conftest import compose_config
 
-    from ppo_torchrl.envs import gym_make_kwargs, make_gym_env
-    from ppo_torchrl.filming import Filming
+    from ppo_torchrl.envs.make import gym_make_kwargs, make_gym_env
+    from ppo_torchrl.envs.filming import Filming
 
     cfg = compose_config(["env=Hopper-v4"])
     assert gym_make_kwargs(cfg.env, "rgb_array")["camera_name"] == "track"
@@ -145,8 +145,8 @@ def test_filming_talks_while_it_renders(tmp_path, capsys):
     10 s, the first after 10 s), with the filming left: the terminal is never silent for a whole episode."""
     from conftest import compose_config
 
-    from ppo_torchrl.envs import make_gym_env
-    from ppo_torchrl.filming import Filming
+    from ppo_torchrl.envs.make import make_gym_env
+    from ppo_torchrl.envs.filming import Filming
 
     env = make_gym_env(compose_config(["env=InvertedPendulum-v4"]).env, "rgb_array", width=64, height=48)
     film = Filming(tmp_path / "p.mp4", env, which=[0])
@@ -289,7 +289,7 @@ def test_an_early_best_checkpoint_is_named_as_such(trained_run, tmp_path, capsys
     names checkpoint=last; a best.pt of the last frame, or checkpoint=last itself, says nothing."""
     import shutil
 
-    from ppo_torchrl.checkpoint import load, load_policy, save
+    from ppo_torchrl.run.checkpoint import load, load_policy, save
 
     run = tmp_path / "run"
     shutil.copytree(trained_run, run, ignore=shutil.ignore_patterns("eval", "videos"))
@@ -333,7 +333,7 @@ def test_a_filmed_floor_reaches_past_where_the_best_policies_hop():
     import mujoco
     from conftest import compose_config
 
-    from ppo_torchrl.envs import make_gym_env
+    from ppo_torchrl.envs.make import make_gym_env
 
     cfg = compose_config(["env=Hopper-v4"])
     env = make_gym_env(cfg.env, "rgb_array", width=160, height=120)

@@ -16,7 +16,7 @@ import torch
 
 from conftest import ROOT, TINY, App, run_cli
 from ppo_torchrl import evaluate, export
-from ppo_torchrl.normalization import pool
+from ppo_torchrl.envs.normalization import pool
 from ppo_torchrl.errors import ConfigError
 from ppo_torchrl.trainer import Trainer
 from ppo_torchrl.collectors.multiprocess import warn_if_oversubscribed
@@ -109,8 +109,8 @@ def test_a_workers_run_checkpoints_evaluates_exports_and_resumes(tiny_cfg, tmp_p
     assert again["return_mean"] == pytest.approx(summary["eval_return_mean"])
     assert export.main([f"run={tmp_path}"]).is_file()
 
-    from ppo_torchrl.checkpoint import load
-    from ppo_torchrl.lifecycle import resume_config
+    from ppo_torchrl.run.checkpoint import load
+    from ppo_torchrl.run.lifecycle import resume_config
 
     state = load(tmp_path / "checkpoints" / "last.pt")
     assert state["normalization"]["collector"] is not None and state["normalization"]["return"] is not None

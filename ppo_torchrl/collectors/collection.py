@@ -42,11 +42,11 @@ from ppo_torchrl.collectors.multiprocess import (
     warn_if_oversubscribed,
     worker_env,
 )
-from ppo_torchrl.env_state import EnvState, env_state_of, mean_metrics
+from ppo_torchrl.envs.state import EnvState, env_state_of, mean_metrics
 from ppo_torchrl.errors import ConfigError
-from ppo_torchrl.envs import make_torchrl_env
-from ppo_torchrl.layout import PRIVILEGED
-from ppo_torchrl.models import sampling_policy
+from ppo_torchrl.envs.make import make_torchrl_env
+from ppo_torchrl.envs.layout import PRIVILEGED
+from ppo_torchrl.rl.models import sampling_policy
 
 BATCH_KEYS = ["observation", "action", ("next", "observation"), ("next", "reward"), ("next", "done"),
               ("next", "terminated"), ("next", "truncated")]

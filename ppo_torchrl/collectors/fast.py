@@ -28,9 +28,9 @@ from torchrl.collectors import Collector
 from torchrl.envs import EnvBase
 
 from ppo_torchrl.internals import OWN, keep_counters, worker_parts
-from ppo_torchrl.env_state import env_state_of, pack
-from ppo_torchrl.layout import PRIVILEGED
-from ppo_torchrl.models import NumpyPolicy
+from ppo_torchrl.envs.state import env_state_of, pack
+from ppo_torchrl.envs.layout import PRIVILEGED
+from ppo_torchrl.rl.models import NumpyPolicy
 
 
 class Buffers:

@@ -17,9 +17,9 @@ from typing import Optional
 from omegaconf import OmegaConf
 
 from ppo_torchrl.internals import mark_started_ray, started_ray, worker_processes
-from ppo_torchrl.envs import make_torchrl_env
+from ppo_torchrl.envs.make import make_torchrl_env
 from ppo_torchrl.errors import ConfigError, EnvironmentFault
-from ppo_torchrl.loggers import quiet_mujoco
+from ppo_torchrl.run.loggers import quiet_mujoco
 
 
 def is_ray_running() -> bool:
@@ -107,7 +107,7 @@ class WorkerWatch:
             self._thread.join(timeout_s)
         if self.dead is None:
             return None
-        from ppo_torchrl.signals import ON_DISK
+        from ppo_torchrl.run.signals import ON_DISK
 
         i, proc = self.dead
         proc.join(timeout_s)  # reaped, for its exit code

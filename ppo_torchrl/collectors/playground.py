@@ -36,7 +36,7 @@ def check_playground(cfg) -> None:
     """One line unless this collector can run cfg: env=playground (its task, EnvPool installed, settings it has), a
     backend that is this collector, no per-step TorchRL transforms, a privileged observation where the critic is
     asked to read one (and statistics it can keep: running or none)."""
-    from ppo_torchrl.envs_playground import pool_settings
+    from ppo_torchrl.envs.playground import pool_settings
 
     env = cfg.env
     if env.get("playground") is None:

@@ -13,7 +13,7 @@ from __future__ import annotations
 import torch
 from torchrl.collectors import Collector
 
-from ppo_torchrl.env_state import env_state_of
+from ppo_torchrl.envs.state import env_state_of
 from ppo_torchrl.internals import OWN
 
 

@@ -22,7 +22,7 @@ import math
 from omegaconf import OmegaConf
 
 from ppo_torchrl.errors import ConfigError
-from ppo_torchrl.layout import OBS_FRAMES, OBS_LAYOUTS
+from ppo_torchrl.envs.layout import OBS_FRAMES, OBS_LAYOUTS
 from ppo_torchrl.robots.model import CONTACT_MODES, GRAVITY, Robot
 
 # env.locomotion / env.terrain keys env=legged derives (module doc), with the env.legged key each comes from

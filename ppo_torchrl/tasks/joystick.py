@@ -20,7 +20,7 @@ def kind(env_cfg) -> Optional[str]:
     """'legged' (a velocity-command env=legged run), 'playground' (env=playground) or None (no joystick)."""
     if env_cfg.get("playground") is not None:
         return "playground"
-    from ppo_torchrl.envs import batched
+    from ppo_torchrl.envs.make import batched
 
     command = (env_cfg.get("legged") or {}).get("command") or {}
     return "legged" if batched(env_cfg) and command.get("kind") == "velocity" else None
@@ -46,7 +46,7 @@ def worlds(env_cfg, extremes: bool) -> list:
     """[(name, draw)]: the nominal world (draw None), then with extremes=true each corner of the randomization."""
     out = [("nominal", None)]
     if extremes:
-        from ppo_torchrl.envs import gym_make_kwargs
+        from ppo_torchrl.envs.make import gym_make_kwargs
         from ppo_torchrl.tasks.locomotion.tracking import extremes as corners
 
         out += corners(gym_make_kwargs(env_cfg)["legged"]["randomize"])
@@ -59,7 +59,7 @@ def track(cfg, ac, obs_stats, episodes: int, seed: int, draw=None) -> dict:
         from ppo_torchrl.tasks import playground_tracking
 
         return playground_tracking.track(cfg, ac, obs_stats, episodes, seed)
-    from ppo_torchrl.envs import make_batch
+    from ppo_torchrl.envs.make import make_batch
     from ppo_torchrl.tasks.locomotion import tracking
 
     return tracking.track(make_batch, cfg, ac, obs_stats, episodes, seed, draw)

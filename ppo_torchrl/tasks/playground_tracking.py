@@ -53,7 +53,7 @@ LAYOUTS = {"Go1JoystickFlatTerrain-v1": _GO1, "Go1JoystickRoughTerrain-v1": _GO1
 
 def layout_of(env_cfg) -> Layout:
     """The task's Layout; one ConfigError line for a task without one."""
-    from ppo_torchrl.envs_playground import task_id
+    from ppo_torchrl.envs.playground import task_id
 
     task = task_id(env_cfg.id)
     if task not in LAYOUTS:
@@ -67,11 +67,11 @@ def track(cfg, ac, obs_stats, episodes: int, seed: int, commands=COMMANDS, settl
           measure_time: float = MEASURE) -> dict:
     """tracking.track's figures on a Playground task: episode e (seed `seed * 1000 + e`, episode_seeds) of every
     command at once, command c in env c of one pool seeded so (env c: that seed + c)."""
-    from ppo_torchrl.envs import episode_seeds
-    from ppo_torchrl.envs_playground import PlaygroundPool, pool_settings
-    from ppo_torchrl.layout import ObservationLayout, Segment
+    from ppo_torchrl.envs.make import episode_seeds
+    from ppo_torchrl.envs.playground import PlaygroundPool, pool_settings
+    from ppo_torchrl.envs.layout import ObservationLayout, Segment
     from ppo_torchrl.robots.model import read_robot
-    from ppo_torchrl.array_policy import policy_of
+    from ppo_torchrl.rl.array_policy import policy_of
 
     layout = layout_of(cfg.env)
     settings = pool_settings(cfg.env)

@@ -76,7 +76,7 @@ class LeggedBatchEnv(gym.vector.VectorEnv):
         self.render_mode, self.width, self.height = render_mode, int(width), int(height)
         self._renderer = None
         if render_mode is not None:  # row 0 is filmed: its floor drawn to the horizon, its buffer the video's size
-            from ppo_torchrl.mjcf import floor_to_the_horizon
+            from ppo_torchrl.envs.mjcf import floor_to_the_horizon
 
             filmed = self.models[0]
             floor_to_the_horizon(filmed)

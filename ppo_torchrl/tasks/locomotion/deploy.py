@@ -25,7 +25,7 @@ SCHEMA = 1
 
 def manifest(cfg) -> dict:
     """policy.json's content for a legged run's config (the robot read from its model as the run trained)."""
-    from ppo_torchrl.envs import make_batch
+    from ppo_torchrl.envs.make import make_batch
 
     batch = make_batch(cfg.env, 1, evaluation=True)
     try:

@@ -54,8 +54,8 @@ def caption(frame: np.ndarray, lines: list) -> np.ndarray:
 def drive(make_batch, cfg, ac, obs_stats, segments: list, path: Path, seed: int, owner=None) -> list:
     import imageio.v2 as imageio
 
-    from ppo_torchrl.filming import VIDEO_MAX_FPS, VIDEO_SIZE
-    from ppo_torchrl.rundir import intend
+    from ppo_torchrl.envs.filming import VIDEO_MAX_FPS, VIDEO_SIZE
+    from ppo_torchrl.run.rundir import intend
     from ppo_torchrl.tasks.locomotion.evaluation import eval_policy
 
     batch = make_batch(cfg.env, 1, evaluation=True, render_mode="rgb_array", width=VIDEO_SIZE[0], height=VIDEO_SIZE[1])

@@ -49,7 +49,7 @@ def task_episodes(make_batch, cfg, ac, obs_stats: Optional[dict], seeds: Sequenc
                   video_length: Optional[float] = None, elsewhere: int = 0) -> dict:
     """evaluate.run_episodes for a legged task (module doc): one episode per seed, the same record. make_batch:
     envs.make_batch (the batch of the task's config)."""
-    from ppo_torchrl.filming import VIDEO_SIZE, EpisodeProgress, Filming
+    from ppo_torchrl.envs.filming import VIDEO_SIZE, EpisodeProgress, Filming
     episodes = len(seeds)
     rows = 1 if video_path is not None else max(1, min(episodes, MAX_ROWS))
     render = {"render_mode": "rgb_array", "width": VIDEO_SIZE[0], "height": VIDEO_SIZE[1]} if video_path else {}
@@ -128,7 +128,7 @@ def task_episodes(make_batch, cfg, ac, obs_stats: Optional[dict], seeds: Sequenc
 def eval_policy(cfg, ac, obs_stats: Optional[dict], batch, rows: int, deterministic: bool, seed: int = 0):
     """The evaluation's policy for `rows` rows of `batch`: raw observations in, actions out, on frozen statistics;
     deterministic: as a one-env evaluation's TorchRL env and actor compute it (row by row)."""
-    from ppo_torchrl.array_policy import policy_of
+    from ppo_torchrl.rl.array_policy import policy_of
 
     return policy_of(cfg, ac, obs_stats, batch.task.obs_dim, batch.observation_layout(), batch.world.model.nu, rows,
                      deterministic, seed)

@@ -48,7 +48,7 @@ def heights_in_metres(heights: list[tuple], env_cfg, text: str = "") -> list[flo
         return [h for h, _ in heights]
     if env_cfg.get("legged") is None:
         raise ConfigError("heights in leg lengths (0.25l) need a run of env=legged, whose robot has one; give m here")
-    from ppo_torchrl.envs import resolve_model_file
+    from ppo_torchrl.envs.make import resolve_model_file
     from ppo_torchrl.robots.model import read_robot
     from ppo_torchrl.robots.recipe import in_metres
 
@@ -83,7 +83,7 @@ def height_sweep(cfg, ac, obs_stats, heights: list[float], episodes: int, seed: 
     import csv
     import io
 
-    from ppo_torchrl.rundir import atomic_write_bytes, atomic_write_json
+    from ppo_torchrl.run.rundir import atomic_write_bytes, atomic_write_json
 
     rows, results, per_episode = [], [], []
     for height in heights:

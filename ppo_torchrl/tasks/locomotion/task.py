@@ -26,7 +26,7 @@ from typing import List, Optional
 import numpy as np
 
 from ppo_torchrl.errors import ConfigError
-from ppo_torchrl.layout import ObservationLayout, Segment
+from ppo_torchrl.envs.layout import ObservationLayout, Segment
 from ppo_torchrl.robots.gait import FOOT_PAIRS, MOVING_SPEED
 from ppo_torchrl.tasks.locomotion.commands import make_command
 from ppo_torchrl.tasks.locomotion.memory import EpisodeMemory

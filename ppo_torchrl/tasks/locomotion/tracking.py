@@ -52,11 +52,11 @@ def extremes(randomize: dict) -> list:
 def track(make_batch, cfg, ac, obs_stats: Optional[dict], episodes: int, seed: int, world_draw: Optional[dict] = None,
           commands=COMMANDS, settle_time: float = SETTLE, measure_time: float = MEASURE) -> dict:
     """The tracking figures of one world (the nominal one, or `world_draw` fixed in every row); times in sqrt(l / g)."""
-    from ppo_torchrl.envs import episode_seeds
+    from ppo_torchrl.envs.make import episode_seeds
     from ppo_torchrl.robots.gait import GaitMeter
     from ppo_torchrl.tasks.locomotion.evaluation import GaitBatch, eval_policy
 
-    from ppo_torchrl.envs import gym_make_kwargs
+    from ppo_torchrl.envs.make import gym_make_kwargs
 
     if (gym_make_kwargs(cfg.env)["legged"].get("command") or {}).get("kind") != "velocity":
         raise ConfigError("tracking=true measures a joystick run (env.legged.command.kind=velocity); this run walks "

@@ -214,7 +214,7 @@ def build_world(kwargs: dict, render: bool = False) -> World:
 def _plain_model(kwargs: dict, render: bool):
     """env=mjcf's model: compiled from its file as Gymnasium's MuJoCo envs do (with a camera and drawn geoms only for
     a rendered copy), actuators without a ctrlrange given their force range / gear (mjcf.check_mjcf)."""
-    from ppo_torchrl.mjcf import check_mjcf
+    from ppo_torchrl.envs.mjcf import check_mjcf
     from ppo_torchrl.tasks.locomotion.filming import add_track_camera, draw_hidden_robot
 
     path = str(kwargs["xml_file"])

@@ -10,8 +10,8 @@ def policy_of(cfg, ac, obs_stats: Optional[dict], obs_dim: int, layout, act_dim:
               seed: int = 0):
     """The evaluation's policy for any env whose raw observations (`obs_dim`, in `layout`) come as [rows, obs_dim]
     arrays."""
-    from ppo_torchrl.models import NumpyPolicy
-    from ppo_torchrl.normalization import make_observation_normalizer
+    from ppo_torchrl.rl.models import NumpyPolicy
+    from ppo_torchrl.envs.normalization import make_observation_normalizer
 
     t = cfg.env.transforms
     norm = make_observation_normalizer(t, obs_dim, obs_stats, frozen=True, layout=layout)
@@ -26,7 +26,7 @@ def policy_of(cfg, ac, obs_stats: Optional[dict], obs_dim: int, layout, act_dim:
     if deterministic:  # what a one-env evaluation's TorchRL env and actor compute, so its episodes to the bit
         from tensordict import TensorDict
 
-        from ppo_torchrl.models import deterministic_policy
+        from ppo_torchrl.rl.models import deterministic_policy
 
         actor = deterministic_policy(ac)
         low, high = ac.action_low.numpy(), ac.action_high.numpy()

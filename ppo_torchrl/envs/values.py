@@ -21,7 +21,7 @@ def check_env(env) -> None:
     given its model (its checks need the robot: without one they named curriculum keys the user never typed), the
     perturbation scales in (0, SCALE_LIMITS], then the env's own checks (envs.env_checks), a refusal naming the key
     the user types (env.legged.<key> for a value env=legged derives from it). One ConfigError line."""
-    from ppo_torchrl.envs import env_checks
+    from ppo_torchrl.envs.make import env_checks
 
     finite(OmegaConf.to_container(env, resolve=True), "env.")
     legged = env.get("legged")

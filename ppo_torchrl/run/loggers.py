@@ -140,7 +140,7 @@ def truncate_logs(run_dir: Path, frames: int) -> None:
     (no newline translation: the csv module ends rows with \\r\\n), so the file stays a prefix of what it was
     and a record taken mid-run stays a prefix of the finished log (records.compress)."""
     from ppo_torchrl.internals import csv_logger_files
-    from ppo_torchrl.rundir import atomic_write_bytes
+    from ppo_torchrl.run.rundir import atomic_write_bytes
 
     def keep_rows(path: Path, header: bool) -> None:  # the file replaced whole: a kill leaves the old rows or the kept
         lines = path.read_bytes().decode().splitlines(keepends=True)
@@ -160,7 +160,7 @@ def amend_last_row(path: Path, frames: int, values: Dict[str, float]) -> bool:
     """Fill `values` into the row of metrics.csv logged at `frames` (the last): the final eval of a run that
     resume= finishes joins its last iteration's row. The file is replaced whole (a kill: the old or the new).
     False when the last row is not at `frames` (nothing written)."""
-    from ppo_torchrl.rundir import atomic_write_bytes
+    from ppo_torchrl.run.rundir import atomic_write_bytes
 
     if not Path(path).exists():
         return False

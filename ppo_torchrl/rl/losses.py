@@ -15,8 +15,8 @@ from torch.func import functional_call
 
 from torchrl.objectives import A2CLoss, ClipPPOLoss, KLPENPPOLoss, LossModule, PPOLoss, ReinforceLoss
 
-from ppo_torchrl.layout import PRIVILEGED
-from ppo_torchrl.models import ActorCritic
+from ppo_torchrl.envs.layout import PRIVILEGED
+from ppo_torchrl.rl.models import ActorCritic
 
 
 def _ppo_kwargs(cfg) -> dict:

@@ -19,10 +19,10 @@ from torch import nn
 from torchrl.data import Bounded
 from torchrl.modules import ActorValueOperator, IndependentNormal, ProbabilisticActor, TanhNormal, ValueOperator
 
-from ppo_torchrl.envs import EnvSpec
+from ppo_torchrl.envs.make import EnvSpec
 from ppo_torchrl.errors import ConfigError
-from ppo_torchrl.layout import PRIVILEGED
-from ppo_torchrl.normalization import clip
+from ppo_torchrl.envs.layout import PRIVILEGED
+from ppo_torchrl.envs.normalization import clip
 
 ACTIVATIONS = {"tanh": nn.Tanh, "relu": nn.ReLU, "elu": nn.ELU}
 # The same activations in numpy, for NumpyPolicy.

@@ -26,10 +26,10 @@ from typing import Any, Dict, List, Optional
 
 from omegaconf import OmegaConf
 
-from ppo_torchrl import rundir
+from ppo_torchrl.run import rundir
 from ppo_torchrl.errors import ConfigError, EnvironmentFault
-from ppo_torchrl.locks import holder
-from ppo_torchrl.ownership import MANIFEST
+from ppo_torchrl.run.locks import holder
+from ppo_torchrl.run.ownership import MANIFEST
 
 
 @dataclass
@@ -87,8 +87,8 @@ class Lifecycle:
         robot model it trained on; else one line that says what to run (the sibling an overwrite moved it to,
         init_from= for a shipped zoo policy, the seed of a trial to resume). The dir is claimed, the
         checkpoint read once."""
-        from ppo_torchrl import checkpoint
-        from ppo_torchrl.model_record import check_model
+        from ppo_torchrl.run import checkpoint
+        from ppo_torchrl.run.model_record import check_model
 
         run_dir = Path(resume).expanduser()
         aside = rundir.moved_aside(run_dir)  # a kill (or a full disk) as an overwrite began leaves its old run there

@@ -22,23 +22,23 @@ from omegaconf import OmegaConf
 from torchrl.envs import Compose, GymWrapper, Transform, TransformedEnv
 
 from ppo_torchrl.errors import ConfigError
-from ppo_torchrl.normalization import (
+from ppo_torchrl.envs.normalization import (
     ObservationNormalization,
     RewardNormalization,
     make_observation_normalizer,
     make_reward_normalizer,
 )
-from ppo_torchrl.env_rows import BatchRows, GymRows
-from ppo_torchrl.env_state import EnvState
-from ppo_torchrl.layout import OBS_FRAMES, OBS_LAYOUTS, privileged_layout_of
-from ppo_torchrl.mjcf import FLOOR_DRAWN_M, MjcfInfo, check_mjcf, floor_to_the_horizon  # noqa: F401 (their home)
-from ppo_torchrl.positions import resumable
+from ppo_torchrl.envs.rows import BatchRows, GymRows
+from ppo_torchrl.envs.state import EnvState
+from ppo_torchrl.envs.layout import OBS_FRAMES, OBS_LAYOUTS, privileged_layout_of
+from ppo_torchrl.envs.mjcf import FLOOR_DRAWN_M, MjcfInfo, check_mjcf, floor_to_the_horizon  # noqa: F401 (their home)
+from ppo_torchrl.envs.positions import resumable
 
 # Gymnasium's v4 MuJoCo envs warn on every make that v5 exists; the warning is not actionable here.
 warnings.filterwarnings("ignore", message=".*is out of date.*")
 warnings.filterwarnings("ignore", category=DeprecationWarning, module="gymnasium")
 
-ASSETS_DIR = Path(__file__).resolve().parent / "assets"
+ASSETS_DIR = Path(__file__).resolve().parent.parent / "assets"
 MJCF_ID = "mjcf"  # env.id of a robot given by its model file (env=mjcf env.xml_file=...)
 MJCF_ENV_ID = "Ant-v5"  # Gymnasium's locomotion class that runs it: it takes any model through xml_file
 # env.terrain keys that do something (the rest only tune these)
@@ -72,7 +72,7 @@ class EnvSpec:
 def check_env_id(env_id: str) -> None:
     """Fail with one line unless `env_id` is a registered continuous-control Gymnasium env (or mjcf)."""
     if env_id not in gym.registry and env_id != MJCF_ID:
-        from ppo_torchrl.envs_playground import playground_hint
+        from ppo_torchrl.envs.playground import playground_hint
 
         from ppo_torchrl.conf_files import env_files
 
@@ -257,7 +257,7 @@ def tracking_camera(env_id: str) -> dict:
 
 def make_gym_env(env_cfg, render_mode: Optional[str] = None, evaluation: bool = False, **render_kwargs) -> gym.Env:
     if env_cfg.get("playground") is not None:  # env=playground: a MuJoCo Playground task stepped by EnvPool
-        from ppo_torchrl.envs_playground import make_playground_env
+        from ppo_torchrl.envs.playground import make_playground_env
 
         return make_playground_env(env_cfg, render_mode, **render_kwargs)
     if batched(env_cfg):  # a robot of a model file is a batch of rows (tasks/locomotion/batch.py), never one env
@@ -371,7 +371,7 @@ def make_rows(env_cfg, num_envs: int, train: bool = True, render_mode: Optional[
             first_env.close()
         return BatchRows(make_batch(env_cfg, num_envs, not train, render_mode, threads, privileged, **render_kwargs))
     if env_cfg.get("playground") is not None:  # the num_envs envs: views of one EnvPool (envs_playground.py)
-        from ppo_torchrl.envs_playground import PlaygroundRows
+        from ppo_torchrl.envs.playground import PlaygroundRows
 
         return PlaygroundRows([resumable(first_env if i == 0 and first_env is not None else
                                          make_gym_env(env_cfg, render_mode, not train, **render_kwargs))

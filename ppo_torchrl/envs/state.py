@@ -44,8 +44,8 @@ from tensordict import TensorDictBase
 from torchrl.data import Composite, Unbounded
 from torchrl.envs.transforms import Transform
 
-from ppo_torchrl.normalization import ObservationNormalizer, RewardNormalizer, pooled
-from ppo_torchrl.safe_pickle import loads as data_loads
+from ppo_torchrl.envs.normalization import ObservationNormalizer, RewardNormalizer, pooled
+from ppo_torchrl.run.safe_pickle import loads as data_loads
 
 EPISODE_KEYS = ("episode_reward", "step_count")
 PACKED = "packed"

@@ -22,7 +22,7 @@ def model_record(env_cfg) -> Optional[dict]:
         return None
     import mujoco
 
-    from ppo_torchrl.envs import resolve_model_file
+    from ppo_torchrl.envs.make import resolve_model_file
 
     path = resolve_model_file(str(xml_file))
     try:

@@ -21,7 +21,7 @@ import signal
 import sys
 from typing import Callable, Dict, List
 
-from ppo_torchrl.envs import episode_seeds
+from ppo_torchrl.envs.make import episode_seeds
 from ppo_torchrl.errors import ConfigError, EnvironmentFault
 from ppo_torchrl.evaluate import evaluate_policy, merge_episodes, run_episodes, summarize
 
@@ -165,8 +165,8 @@ def _serve(cfg_dict: dict, jobs, results, parent_pid: int) -> None:
     import torch
     from omegaconf import OmegaConf
 
-    from ppo_torchrl.envs import env_spec, seed_everything
-    from ppo_torchrl.models import make_actor_critic
+    from ppo_torchrl.envs.make import env_spec, seed_everything
+    from ppo_torchrl.rl.models import make_actor_critic
 
     torch.set_num_threads(1)
     cfg = OmegaConf.create(cfg_dict)

@@ -32,7 +32,7 @@ from torchrl.data import Unbounded
 from torchrl.envs.transforms import ObservationTransform, Transform
 
 from ppo_torchrl.errors import ConfigError
-from ppo_torchrl.layout import ObservationLayout
+from ppo_torchrl.envs.layout import ObservationLayout
 
 OBS_MODES = ("running", "fixed", "none")  # env.transforms.obs_norm
 REWARD_MODES = ("return", "scale", "none")  # env.transforms.reward_norm

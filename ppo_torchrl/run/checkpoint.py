@@ -17,8 +17,8 @@ from typing import Optional
 import torch
 
 from ppo_torchrl.errors import ConfigError
-from ppo_torchrl.rundir import CHECKPOINTS, LAST, atomic_write_bytes, moved_aside
-from ppo_torchrl.safe_pickle import load_torch, refused_name
+from ppo_torchrl.run.rundir import CHECKPOINTS, LAST, atomic_write_bytes, moved_aside
+from ppo_torchrl.run.safe_pickle import load_torch, refused_name
 
 BEST = "best.pt"
 
@@ -35,7 +35,7 @@ def load(path: Path | str) -> dict:
     path = Path(path)
     if not path.is_file():
         raise ConfigError(f"checkpoint '{path}' does not exist")
-    from ppo_torchrl.env_state import check_packed  # torchrl's import, only when a checkpoint is read
+    from ppo_torchrl.envs.state import check_packed  # torchrl's import, only when a checkpoint is read
 
     try:
         state = load_torch(path)  # tensors, numbers, strings, numpy arrays, plain containers: nothing runs
@@ -152,8 +152,8 @@ def note_older_best(best: Path, state: dict) -> None:
 def load_policy(run_dir: Path, which: str = "best"):
     """(config, actor-critic with the checkpoint's weights, checkpoint state) of a finished run."""
     from ppo_torchrl.config import run_config
-    from ppo_torchrl.envs import env_spec
-    from ppo_torchrl.models import make_actor_critic
+    from ppo_torchrl.envs.make import env_spec
+    from ppo_torchrl.rl.models import make_actor_critic
 
     path = resolve_checkpoint(run_dir, which)
     state = load(path)
@@ -172,7 +172,7 @@ def check_same_env(run_dir: Path, cfg, checkpoint: str) -> None:
     """A checkpoint of another env is not filed in this run's dir: one ConfigError line (out=<dir> writes it
     elsewhere). The run's env is its config.yaml's; a run without a readable one is not checked."""
     from ppo_torchrl.config_data import read_config
-    from ppo_torchrl.envs import env_label
+    from ppo_torchrl.envs.make import env_label
 
     try:
         own = read_config(Path(run_dir) / "config.yaml").env

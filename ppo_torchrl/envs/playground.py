@@ -42,9 +42,9 @@ from typing import Optional
 import gymnasium as gym
 import numpy as np
 
-from ppo_torchrl.env_rows import GymRows
+from ppo_torchrl.envs.rows import GymRows
 from ppo_torchrl.errors import ConfigError
-from ppo_torchrl.layout import ObservationLayout, Segment
+from ppo_torchrl.envs.layout import ObservationLayout, Segment
 
 INSTALL = 'pip install -e ".[envpool]" (make setup installs it; EnvPool has wheels for Python >= 3.11)'
 ALIAS = "MuJoCoPlayground/"  # EnvPool's alias prefix of its Playground tasks

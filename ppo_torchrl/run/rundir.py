@@ -38,7 +38,7 @@ from pathlib import Path
 from typing import Dict, List, Optional
 
 from ppo_torchrl.errors import ConfigError
-from ppo_torchrl.ownership import MANIFEST, digest, holder, inside_run, relative, walk
+from ppo_torchrl.run.ownership import MANIFEST, digest, holder, inside_run, relative, walk
 
 CHECKPOINTS = "checkpoints"  # a run dir's checkpoint folder
 LAST = "last.pt"  # in it, the checkpoint a resume continues from
@@ -76,7 +76,7 @@ UNLISTED_OK = re.compile(r"^(?:(?:seed\d+/)?checkpoints/(?:last|best|frames_\d+)
 # manifest its claim makes (Lifecycle.claim); `record` drops a name whose file never came.
 STARTED = ("config.yaml", "metrics.csv", "summary.json", "error.log", "trial.json")
 
-ZOO = Path(__file__).resolve().parent.parent / "zoo"  # the shipped policies: read-only to every command
+ZOO = Path(__file__).resolve().parents[2] / "zoo"  # the shipped policies: read-only to every command
 _BEGAN_NS = time.time_ns()  # this process's start: `record` lists only the files written since
 
 

@@ -28,7 +28,7 @@ from torch.func import grad_and_value
 
 from torchrl.objectives import LossModule
 
-from ppo_torchrl.losses import LOSS_METRICS, make_loss_step
+from ppo_torchrl.rl.losses import LOSS_METRICS, make_loss_step
 
 StepResult = Tuple[torch.Tensor, torch.Tensor]  # (loss and LOSS_METRICS values, stacked; grad norm)
 

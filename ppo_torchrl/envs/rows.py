@@ -31,7 +31,7 @@ from typing import List, Optional
 import gymnasium as gym
 import numpy as np
 
-from ppo_torchrl.layout import ObservationLayout, layout_of, privileged_layout_of
+from ppo_torchrl.envs.layout import ObservationLayout, layout_of, privileged_layout_of
 
 
 class GymRows:

@@ -14,8 +14,8 @@ from omegaconf import OmegaConf
 from ppo_torchrl.collectors.choice import describe_backend
 from ppo_torchrl.conf_files import CONF_DIR
 from ppo_torchrl.config import Config
-from ppo_torchrl.envs import MJCF_ID, env_label
-from ppo_torchrl.loggers import job_tag
+from ppo_torchrl.envs.make import MJCF_ID, env_label
+from ppo_torchrl.run.loggers import job_tag
 
 NOT_SHOWN = ("env.", "seed", "resume")  # the env is named anyway; the seed and resume dir are the user's
 # loss.<key>: the losses that read it (losses.py); every loss reads the others
@@ -85,7 +85,7 @@ def robot_line(env_cfg) -> str:
     """env=legged: a second line, what was read from the robot's model and what the recipe asks of it."""
     if env_cfg.get("legged") is None or not env_cfg.get("xml_file"):
         return ""
-    from ppo_torchrl.envs import resolve_model_file
+    from ppo_torchrl.envs.make import resolve_model_file
     from ppo_torchrl.robots.model import read_robot
     from ppo_torchrl.robots.recipe import describe
 

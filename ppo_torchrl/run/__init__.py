@@ -1,0 +1,2 @@
+"""A run's lifecycle: its dir and who owns it, checkpoints, the loggers, its start line,
+signals, and the background evaluations."""
